@@ -1,2 +1,219 @@
-def main():
-    print("ok")
+"""`wideprint` command line (README "Command line"; contract in docs/cli.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_JOB_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
+
+
+def _rip_options(p: argparse.ArgumentParser) -> None:
+    from ..rip.halftone import METHODS
+    p.add_argument("--dither", choices=METHODS, default="fs", help="halftone (default fs)")
+    p.add_argument("--passes", type=int, choices=(1, 2, 3, 4, 6, 8), default=1)
+    p.add_argument("--bidir", action="store_true", help="print in both carriage directions")
+    p.add_argument("--dpi", type=int, choices=(150, 300, 600), default=300,
+                   help="scan-direction resolution (encoder trigger mode)")
+    p.add_argument("--ink-limit", type=float, metavar="PERCENT",
+                   help="total ink limit, e.g. 280")
+    p.add_argument("--input-icc", metavar="FILE", help="input ICC profile (overrides embedded)")
+    p.add_argument("--output-icc", metavar="FILE", help="output CMYK ICC profile")
+    p.add_argument("--intent", default="relative",
+                   choices=("perceptual", "relative", "saturation", "absolute"))
+    p.add_argument("--profile", metavar="TOML", help="printer profile (default: resources/printers/default.toml)")
+
+
+def _settings(args):
+    from ..rip.pipeline import RipSettings
+    return RipSettings(dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
+                       ink_limit=args.ink_limit, input_icc=args.input_icc,
+                       output_icc=args.output_icc, intent=args.intent)
+
+
+def _profile(args):
+    from ..rip.profile import load_profile
+    return load_profile(args.profile)
+
+
+def _media_path(pattern: str | None, index: int, count: int) -> str | None:
+    if not pattern:
+        return None
+    if "{job}" in pattern:
+        return pattern.format(job=index + 1)
+    if count == 1:
+        return pattern
+    p = Path(pattern)
+    return str(p.with_name(f"{p.stem}-{index + 1}{p.suffix}"))
+
+
+def cmd_rip(args) -> int:
+    from ..rip.load import ImageError
+    from ..rip.pipeline import RipJob
+    try:
+        job = RipJob(args.file, _settings(args), _profile(args))
+        dots = job.write_planes(args.output)
+    except (ImageError, ValueError, OSError) as exc:
+        print(f"wideprint rip: {exc}", file=sys.stderr)
+        return EXIT_JOB_FAILED
+    print(f"{args.output}: {job.width} x {job.height} dots at {args.dpi} x "
+          f"{job.dpi_y:.1f} dpi, drops C {dots[0]} M {dots[1]} Y {dots[2]} K {dots[3]}")
+    return EXIT_OK
+
+
+def _expand(files: list[str]) -> list[str]:
+    out = []
+    for f in files:
+        p = Path(f)
+        if p.is_dir():
+            out += sorted(str(c) for c in p.iterdir() if c.is_file() and not c.name.startswith("."))
+        else:
+            out.append(f)
+    return out
+
+
+def cmd_print(args) -> int:
+    from ..device_sim.faults import Faults
+    from ..driver.device import open_device
+    from ..driver.job import JobError, PrintJob
+    from ..driver.link import LinkError
+    from ..rip.load import ImageError
+    from ..rip.pipeline import RipJob
+
+    files = _expand(args.files)
+    try:
+        profile = _profile(args)
+        faults = Faults.parse(args.inject)
+        settings = _settings(args)
+    except ValueError as exc:
+        print(f"wideprint print: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.inject and args.device != "emulator":
+        print("wideprint print: --inject needs --device emulator", file=sys.stderr)
+        return EXIT_USAGE
+    media = {}
+    try:
+        dev = open_device(args.device, profile, faults,
+                          media_path=lambda job: media.get(job), event_log=args.event_log)
+    except (LinkError, ValueError, OSError) as exc:
+        print(f"wideprint print: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    reports, failed = [], 0
+    try:
+        for i, f in enumerate(files):
+            media[i + 1] = _media_path(args.media_out, i, len(files))
+            try:
+                rip = RipJob(f, settings, profile)
+            except (ImageError, ValueError, OSError) as exc:
+                failed += 1
+                reports.append(dict(file=f, state="failed", message=str(exc)))
+                print(f"{f}: FAILED: {exc}", file=sys.stderr)
+                continue
+            job = PrintJob(dev, rip, job_id=i + 1)
+            try:
+                rep = job.run().as_dict()
+                rep["media"] = media[i + 1]
+                if dev.emulator is not None:
+                    stats = dev.emulator.jobs_done.get(i + 1, {})
+                    rep["stray_drops"] = stats.get("stray")
+                print(f"{f}: printed {rep['passes_printed']} passes, "
+                      f"{rep['width_dots']} x {rep['height_rows']} dots, "
+                      f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
+                      + (f" -> {rep['media']}" if rep["media"] else ""))
+            except (JobError, ImageError) as exc:
+                failed += 1
+                rep = job.report.as_dict()
+                rep["state"], rep["message"] = "failed", str(exc)
+                print(f"{f}: FAILED: {exc}", file=sys.stderr)
+            reports.append(rep)
+    finally:
+        if dev.emulator is not None:
+            dev.emulator.close()
+        dev.close()
+    if args.report:
+        Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(reports, indent=2))
+    return EXIT_JOB_FAILED if failed else EXIT_OK
+
+
+def cmd_emulator(args) -> int:
+    from ..device_sim.faults import Faults
+    from ..device_sim.printer import Printer
+    from ..device_sim.server import EmulatorServer
+    try:
+        faults = Faults.parse(args.inject)
+        profile = _profile(args)
+    except ValueError as exc:
+        print(f"wideprint emulator: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    media = args.media_out
+    printer = Printer(profile, faults,
+                      media_path=(lambda job: media.format(job=job) if "{job}" in media else media)
+                      if media else None, event_log=args.event_log)
+    server = EmulatorServer(printer, host="127.0.0.1", data_port=args.data_port,
+                            serial_tcp_port=args.serial_port)
+    print(f"device: {server.device_spec}", flush=True)
+    signal.signal(signal.SIGTERM, lambda *a: server.stop())
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+    return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+    ap = argparse.ArgumentParser(prog="wideprint", description="RIP and driver for the "
+                                 "3.4 m CMYK solvent printer (8 x Xaar XJ128), with its emulator.")
+    ap.add_argument("--version", action="version", version=f"wideprint {__version__}")
+    ap.add_argument("-v", "--verbose", action="store_true")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("print", help="rip and print files")
+    p.add_argument("files", nargs="+", metavar="FILE", help="images (TIFF/BMP/JPEG) or folders")
+    p.add_argument("--device", default="emulator",
+                   help="'emulator' (in-process) or serial=PORT,data=tcp://HOST:PORT")
+    p.add_argument("--media-out", metavar="MEDIA.tif",
+                   help="emulator only: write the printed media (with several files: -N suffix or {job})")
+    p.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
+    p.add_argument("--report", metavar="JSON", help="write the job reports")
+    p.add_argument("--json", action="store_true", help="print the job reports as JSON")
+    p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
+    _rip_options(p)
+    p.set_defaults(func=cmd_print)
+
+    p = sub.add_parser("rip", help="write the halftone planes the RIP intends")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
+    _rip_options(p)
+    p.set_defaults(func=cmd_rip)
+
+    p = sub.add_parser("emulator", help="run the printer emulator on a pty and TCP")
+    p.add_argument("--data-port", type=int, default=0, help="TCP port of the data channel (0 = any)")
+    p.add_argument("--serial-port", type=int, default=None,
+                   help="serve the command channel on this TCP port instead of a pty")
+    p.add_argument("--media-out", metavar="MEDIA.tif", help="media file ({job} = job id)")
+    p.add_argument("--inject", action="append", metavar="KIND=VALUE")
+    p.add_argument("--event-log", metavar="JSONL")
+    p.add_argument("--profile", metavar="TOML")
+    p.set_defaults(func=cmd_emulator)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,142 @@
+"""One print line in the emulator: the carriage sweeps, the encoder triggers fires, the
+FPGA feeds each fire from the head FIFOs, and drops land on the media.
+
+Event-driven and vectorised: the fire times come from the motion profile in closed form;
+the DMA ring and FIFOs are stepped once per data block (not per fire): block b may enter
+the FIFOs when its host buffer was ready and the FIFOs had room, and an underrun is the
+first fire whose block was not in the FIFO in time (docs/emulator.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..driver import protocol as P
+from .motion import Trapezoid
+
+
+class LineRun:
+    def __init__(self, printer, move: Trapezoid, t_start: float):
+        fpga = printer.fpga
+        self.printer = printer
+        self.pass_id = fpga.pass_id
+        self.forward = fpga.forward
+        self.k = printer.profile.counts_per_inch // fpga.dpi
+        self.first = fpga.fire_start
+        self.n = fpga.fire_count
+        i = np.arange(self.n)
+        self.columns = self.first + i if self.forward else self.first + self.n - 1 - i
+        self.move = move
+        self.t_start = t_start
+        self.t_fire = t_start + move.time_at(self.columns * self.k)
+        self.stop_index = self.n           # fires at or after it are never made
+        self.stop_fault = P.Fault.NONE
+        self.stop_head = 0xFF
+        self.done = False
+        self.fault = P.Fault.NONE
+        self.min_level: int | None = None
+        self._plan_stops()
+
+    # -- faults known when the line starts ----------------------------------------------------
+    def _stop_at(self, index: int, fault: P.Fault, head: int = 0xFF) -> None:
+        if index < self.stop_index:
+            self.stop_index, self.stop_fault, self.stop_head = index, fault, head
+
+    def _plan_stops(self) -> None:
+        pr, inj = self.printer, self.printer.faults
+        pos = self.columns * self.k
+        if inj.limit_at is not None:
+            hit = np.flatnonzero(pos >= inj.limit_at)
+            if hit.size and self.forward:
+                self._stop_at(int(hit[0]), P.Fault.LIMIT_RIGHT)
+        if inj.encoder_glitch_at is not None:
+            hit = np.flatnonzero((pos >= inj.encoder_glitch_at) if self.forward
+                                 else (pos <= inj.encoder_glitch_at))
+            if hit.size:
+                self._stop_at(int(hit[0]), P.Fault.ENCODER)
+        for name, pass_id in inj.overtemp:
+            if pass_id == self.pass_id:
+                head = pr.head_index(name)
+                self._stop_at(self.n // 2, P.Fault.HEAD_OVERTEMP, head)
+        if self.n > 1:
+            period = np.diff(self.t_fire)
+            fast = np.flatnonzero(period < 1.0 / pr.profile.max_fire_hz)
+            if fast.size:
+                self._stop_at(int(fast[0]) + 1, P.Fault.OVERSPEED, 0)
+
+    # -- progress -------------------------------------------------------------------------
+    def advance(self, link_alive: bool) -> bool:
+        """Run as far as the data allows.  Returns True when the line has ended
+        (done or faulted), False when it waits for data from the host."""
+        pr, fpga = self.printer, self.printer.fpga
+        cap = fpga.capacity_fires
+        self._drain_fifo()          # blocks preloaded before the line started
+        while not self.done:
+            if fpga.loaded_fires >= min(self.n, self.stop_index):
+                if self.stop_index < self.n:
+                    self._end(self.stop_index, self.stop_fault, self.stop_head)
+                else:
+                    self._end(self.n, P.Fault.NONE)
+                return True
+            if not fpga.ring:
+                if link_alive:
+                    return False
+                self._end(fpga.loaded_fires, P.Fault.DATA_LINK_LOST)
+                return True
+            rb = fpga.ring[0]
+            first = fpga.loaded_fires
+            room_idx = first + rb.block.fires - cap - 1     # this fire must be made first
+            room_t = self.t_fire[room_idx] if room_idx >= 0 else -np.inf
+            load_t = max(room_t, rb.ready_s + pr.dma_time(rb.block))
+            if first < self.n and load_t > self.t_fire[first] and first < self.stop_index:
+                self._end(first, P.Fault.FIFO_UNDERRUN, 0)
+                return True
+            consumed = int(np.searchsorted(self.t_fire, load_t, side="right"))
+            level = first - min(consumed, first)
+            self.min_level = level if self.min_level is None else min(self.min_level, level)
+            fpga.move_next()
+            pr.on_block_moved(load_t)
+            self._drain_fifo()
+        return True
+
+    def _drain_fifo(self) -> None:
+        """Fire the blocks in the FIFOs.  Drops are placed by position, so a block's fires
+        can be placed as soon as it is certain they happen (its data arrived in time)."""
+        fifo = self.printer.fpga.fifo
+        while fifo:
+            block = fifo.popleft()
+            self._fire_block(block, block.first_fire)
+
+    def _fire_block(self, block: P.Block, first: int) -> None:
+        pr = self.printer
+        last = min(first + block.fires, self.stop_index)
+        count = last - first
+        if count <= 0:
+            return
+        mask_heads = [h for h in range(pr.n_heads) if block.head_mask >> h & 1]
+        cols = self.columns[first:last]
+        for part, h in enumerate(mask_heads):
+            bits = P.words_to_nozzles(block.words[part, :count])          # (count, 128)
+            bad = np.flatnonzero(bits[:, 0] | bits[:, 127])
+            if bad.size:
+                self._stop_at(first + int(bad[0]), P.Fault.HEAD_DATA, h)
+                bits = bits[:bad[0]]
+            pr.land_drops(h, cols[:bits.shape[0]], bits, self.forward)
+
+    def _end(self, fired: int, fault: P.Fault, head: int = 0xFF) -> None:
+        pr = self.printer
+        self.done = True
+        self.fault = fault
+        pr.fpga.fired = fired
+        if fault == P.Fault.NONE:
+            t_end = self.t_start + self.move.duration
+            pr.carriage_stop(self.move.end, t_end)
+        else:
+            t = self.t_fire[fired] if fired < self.n else self.t_start + self.move.duration
+            pos = self.move.position_at(t - self.t_start)
+            column = int(self.columns[fired]) if fired < self.n else int(self.columns[-1])
+            pr.raise_fault(fault, head=head, pass_id=self.pass_id, column=column, t=t)
+            pr.carriage_stop(pos, t)
+        pr.log("line", pass_id=self.pass_id, forward=self.forward, first_column=int(self.first),
+               fires=int(self.n), fired=int(fired), fault=fault.name,
+               min_fifo_words=None if self.min_level is None else self.min_level * P.WORDS_PER_FIRE)

@@ -1,0 +1,436 @@
+"""The emulated printer: DSP, FPGA, carriage board, heads, carriage, feed and media.
+
+It sees only bytes: `serial_in()` takes command-channel bytes and returns the DSP's
+answer, `data_in()` takes data-channel bytes and `data_out()` gives the FPGA's reports
+(docs/protocol.md).  Simulated time advances with the motions; a print line advances as
+far as its data allows (conservative co-simulation: the device never guesses bytes it has
+not received, and host timing comes from the host-jitter model, docs/emulator.md).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from collections import deque
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..driver import protocol as P
+from ..rip.profile import Profile, load_profile
+from .dsp import Dsp
+from .faults import Faults
+from .fpga import Fpga
+from .head import Head
+from .line import LineRun
+from .media import Media
+from .motion import Trapezoid, ramp_counts
+
+PCI_BYTES_S = 60e6           # effective PLX9054 DMA rate (33 MHz, 32 bit, with overhead)
+HOME_SPEED_MM_S = 50.0
+POWER_UP_POSITION = 23_456   # where the carriage happens to be at power-up (counts from the left switch)
+SHEET_LEFT_MM = 320.0        # the emulator's sheet: left edge this far from the left switch
+
+
+class Printer:
+    def __init__(self, profile: Profile | None = None, faults: Faults | None = None,
+                 media_path: str | Callable[[int], str] | None = None,
+                 event_log: str | Path | None = None):
+        self.profile = profile or load_profile()
+        self.faults = faults or Faults()
+        prof = self.profile
+        self.n_heads = len(prof.heads)
+        self.fpga = Fpga(self.n_heads, self.faults.fifo_words or prof.fifo_words,
+                         prof.pass_buffer_words, prof.ring_blocks)
+        self.heads = [Head(h.index, h.name, temperature_c=float(prof.raw["head"]["nominal_temp_c"]),
+                           overtemp_c=float(prof.raw["head"]["overtemp_c"])) for h in prof.heads]
+        for name, nozzle in self.faults.dead_nozzle:
+            self.heads[self.head_index(name)].dead.add(nozzle)
+        self.dsp = Dsp(self)
+        self.rng = random.Random(self.faults.seed)
+        self.time = 0.0
+        self.baud = P.DEFAULT_BAUD
+        self.enabled = False
+        self.homed = False
+        self.fault = P.Fault.NONE
+        self.fault_head, self.fault_pass, self.fault_column = 0xFF, 0, 0
+        self.position = float(POWER_UP_POSITION)    # carriage, counts from the left switch
+        self.count_offset = POWER_UP_POSITION       # DSP counter = position - offset (0 at power-up)
+        self.motion = P.Motion.IDLE
+        self.line_done = False
+        self.feed_done = False
+        self.paper_steps = 0
+        self.paper_measured = False
+        width = self.faults.paper_width_mm or float(prof.raw["paper"]["default_width_mm"])
+        left = SHEET_LEFT_MM / 25.4 * prof.counts_per_inch
+        self.sheet = (left, left + width / 25.4 * prof.counts_per_inch)
+        self.paper_edges = (0, 0)
+        self.paper_left_steps = (None if self.faults.paper_length_mm is None else
+                                 int(self.faults.paper_length_mm * 1000 / prof.feed_um_per_step))
+        self.line_cfg: dict | None = None
+        self.line: LineRun | None = None
+        self.link_alive = True
+        self.block_decoder = P.BlockDecoder()
+        self._data_out = bytearray()
+        self._pass_blocks_received = 0
+        self._move_times: list[float] = []
+        self.blocks_total = 0
+        self.job: dict | None = None
+        self.media: Media | None = None
+        self.media_path = media_path
+        self.jobs_done: dict[int, dict] = {}
+        self.config_traces = []
+        self._log_file = open(event_log, "w") if event_log else None
+        self.events: deque = deque(maxlen=200_000)
+
+    # -- bookkeeping ------------------------------------------------------------------------
+    def log(self, event: str, **fields) -> None:
+        rec = {"t": round(self.time, 9), "event": event, **fields}
+        self.events.append(rec)
+        if self._log_file:
+            self._log_file.write(json.dumps(rec) + "\n")
+
+    def head_index(self, name: str) -> int:
+        for h in self.profile.heads:
+            if h.name == name:
+                return h.index
+        raise ValueError(f"no head named {name!r} (heads: {[h.name for h in self.profile.heads]})")
+
+    def heads_configured(self) -> bool:
+        return all(h.configured for h in self.heads)
+
+    def busy(self) -> bool:
+        return self.line is not None and not self.line.done
+
+    def close(self) -> None:
+        if self.media:
+            self.media.close()
+        if self._log_file:
+            self._log_file.close()
+            self._log_file = None
+
+    # -- serial line ----------------------------------------------------------------------
+    def _noise(self, data: bytes) -> bytes:
+        f = self.faults
+        if not (f.serial_ber or f.serial_byte_error or f.serial_drop) or not data:
+            return data
+        out = bytearray()
+        for b in data:
+            if f.serial_drop and self.rng.random() < f.serial_drop:
+                continue
+            if f.serial_byte_error and self.rng.random() < f.serial_byte_error:
+                b ^= 1 << self.rng.randrange(8)
+            if f.serial_ber:
+                for bit in range(8):
+                    if self.rng.random() < f.serial_ber:
+                        b ^= 1 << bit
+            out.append(b)
+        return bytes(out)
+
+    def serial_in(self, data: bytes) -> bytes:
+        data = self._noise(data)
+        self.log("serial_rx", hex=data.hex())
+        return self._noise(self.dsp.receive(data))
+
+    # -- data channel -----------------------------------------------------------------------
+    def data_in(self, data: bytes) -> None:
+        try:
+            blocks = self.block_decoder.feed(data)
+        except P.BlockError as exc:
+            self.log("data_error", error=str(exc))
+            self.raise_fault(P.Fault.DATA_CRC, pass_id=self.fpga.pass_id)
+            return
+        for block in blocks:
+            self.blocks_total += 1
+            if block.kind == P.BLOCK_DATA:
+                idx = self._pass_blocks_received
+                self._pass_blocks_received += 1
+                if idx < self.fpga.ring_blocks or idx - self.fpga.ring_blocks >= len(self._move_times):
+                    ready = self.time
+                else:
+                    ready = self._move_times[idx - self.fpga.ring_blocks] + self.host_latency()
+            else:
+                ready = self.time
+            fault = self.fpga.accept(block, ready)
+            if fault != P.Fault.NONE:
+                self.log("block_refused", pass_id=block.pass_id, first_fire=block.first_fire,
+                         fault=fault.name)
+                self.raise_fault(fault, pass_id=block.pass_id, column=block.first_fire)
+            self.pump()
+            if self.faults.data_drop_after is not None and \
+                    self.blocks_total >= self.faults.data_drop_after:
+                self.faults.data_drop_after = None      # one drop per injection
+                self.data_link_lost()
+                return
+
+    def data_out(self) -> bytes:
+        out = bytes(self._data_out)
+        self._data_out.clear()
+        return out
+
+    def data_link_lost(self) -> None:
+        self.log("data_link_lost")
+        self.link_alive = False
+        self.block_decoder = P.BlockDecoder()
+        self.pump()
+
+    def data_link_up(self) -> None:
+        self.link_alive = True
+
+    def host_latency(self) -> float:
+        """Host DMA refill latency (docs/emulator.md): how long after a ring slot frees the
+        host has the next block in it."""
+        f = self.faults
+        base = f.data_stall
+        if f.host_jitter == "ideal":
+            return base
+        if f.host_jitter == "typical":
+            lat = 150e-6 + self.rng.lognormvariate(math.log(300e-6), 0.8)
+            if self.rng.random() < 1e-3:
+                lat += self.rng.uniform(2e-3, 10e-3)
+        else:  # loaded
+            lat = 500e-6 + self.rng.lognormvariate(math.log(1.5e-3), 1.0)
+            if self.rng.random() < 1e-2:
+                lat += self.rng.uniform(5e-3, 30e-3)
+        return base + lat
+
+    def dma_time(self, block: P.Block) -> float:
+        return (block.words.nbytes + P.BLOCK_HEADER.size + 4) / PCI_BYTES_S
+
+    def on_block_moved(self, t: float) -> None:
+        self._move_times.append(t)
+        self._report(0)
+
+    def _report(self, flags: int) -> None:
+        f = self.fpga
+        if f.underrun_mask:
+            flags |= P.REPORT_UNDERRUN
+        levels = [f.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
+        self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved,
+                                   f.fired if self.line is None or self.line.done else f.loaded_fires,
+                                   tuple(levels)).encode()
+
+    def pump(self) -> None:
+        """Let the line run as far as its data allows; move preloaded blocks into the FIFOs."""
+        if self.line is not None and not self.line.done:
+            ended = self.line.advance(self.link_alive)
+            if ended:
+                self.fpga.firing = False
+                self._report(P.REPORT_PASS_DONE if self.line.fault == P.Fault.NONE else 0)
+            return
+        while self.fpga.room_for_next() and self.fault == P.Fault.NONE:
+            self.fpga.move_next()
+            self._move_times.append(self.time)
+            self._report(0)
+
+    # -- faults -----------------------------------------------------------------------------
+    def raise_fault(self, fault: P.Fault, head: int = 0xFF, pass_id: int = 0, column: int = 0,
+                    t: float | None = None) -> None:
+        if self.fault != P.Fault.NONE:
+            return
+        self.fault, self.fault_head, self.fault_pass, self.fault_column = fault, head, pass_id, column
+        if fault == P.Fault.FIFO_UNDERRUN and head != 0xFF:
+            self.fpga.underrun_mask |= (1 << self.n_heads) - 1
+        self.fpga.write_reg(P.REG_WE_EN, 0)
+        if self.line is not None and not self.line.done:
+            self.line.done = True
+            self.line.fault = fault
+        self.motion = P.Motion.IDLE
+        self.log("fault", fault=fault.name, head=head, pass_id=pass_id, column=column,
+                 text=P.FAULT_TEXT[fault])
+
+    def clear_fault(self) -> None:
+        self.fault = P.Fault.NONE
+        self.fault_head, self.fault_pass, self.fault_column = 0xFF, 0, 0
+        self.fpga.underrun_mask = 0
+        for h in self.heads:
+            h.temperature_c = min(h.temperature_c, h.overtemp_c - 5)
+
+    # -- status -------------------------------------------------------------------------------
+    def counter(self) -> int:
+        return int(round(self.position)) - self.count_offset
+
+    def status(self) -> P.Status:
+        flags = 0
+        for on, bit in ((self.enabled, P.FLAG_ENABLED), (self.homed, P.FLAG_HOMED),
+                        (self.heads_configured(), P.FLAG_HEADS_CONFIGURED),
+                        (self.paper_measured, P.FLAG_PAPER_MEASURED),
+                        (self.line_done, P.FLAG_LINE_DONE), (self.feed_done, P.FLAG_FEED_DONE),
+                        (self.job is not None, P.FLAG_JOB_OPEN),
+                        (self.fault != P.Fault.NONE, P.FLAG_FAULT)):
+            if on:
+                flags |= bit
+        motion = P.Motion.PRINTING if self.busy() else self.motion
+        fires = self.fpga.fired if not self.busy() else self.fpga.loaded_fires
+        levels = [self.fpga.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
+        return P.Status(P.Result.OK, flags, motion, self.counter(), 0, self.paper_steps,
+                        self.fpga.pass_id, fires, self.fault, self.fault_head, self.fault_pass,
+                        self.fault_column, self.fpga.ring_free(), tuple(levels))
+
+    def paper_present(self) -> bool:
+        return self.paper_left_steps is None or self.paper_left_steps > 0
+
+    # -- motions ------------------------------------------------------------------------------
+    def _mm_s(self, mm_s: float) -> float:
+        return mm_s / 25.4 * self.profile.counts_per_inch
+
+    def _move_to(self, target: float, speed: float | None = None) -> None:
+        prof = self.profile
+        v = speed or self._mm_s(float(prof.raw["carriage"]["max_speed_mm_s"]))
+        move = Trapezoid(self.position, target, v, prof.accel_counts_s2())
+        self.time += move.duration
+        self.position = float(target)
+
+    def home(self) -> None:
+        self._move_to(0.0, self._mm_s(HOME_SPEED_MM_S))
+        self.count_offset = 0
+        self.homed = True
+        self.log("homed")
+
+    def measure_paper(self) -> None:
+        left, right = self.sheet
+        self._move_to(min(self.profile.rail_counts, right + 600))
+        self._move_to(max(0.0, left - 600))
+        self.paper_edges = (int(math.ceil(left)) - self.count_offset,
+                            int(math.floor(right)) - self.count_offset)
+        self.paper_measured = True
+        self.log("paper_measured", left=self.paper_edges[0], right=self.paper_edges[1])
+
+    def park(self) -> P.Result:
+        self._move_to(float(self.profile.raw["carriage"]["park_counts"]) + self.count_offset)
+        return P.Result.OK
+
+    def feed(self, steps: int, profile: int, vmax: int, acc: int) -> P.Result:
+        if not self.paper_present():
+            self.raise_fault(P.Fault.PAPER_OUT)
+            return P.Result.FAULT_ACTIVE
+        made = steps
+        if self.paper_left_steps is not None and steps > self.paper_left_steps:
+            made = self.paper_left_steps
+        move = Trapezoid(0, abs(made), vmax, acc)
+        self.time += move.duration
+        self.paper_steps += made
+        if self.paper_left_steps is not None:
+            self.paper_left_steps -= made
+        self.feed_done = True
+        self.log("feed", steps=made, paper_steps=self.paper_steps)
+        if made != steps:
+            self.raise_fault(P.Fault.PAPER_OUT)
+        self._flush_media()
+        return P.Result.OK
+
+    def set_line(self, pass_id: int, direction: int, dpi: int, first: int, count: int,
+                 speed: int, accel: int) -> P.Result:
+        prof = self.profile
+        if direction not in (0, 1) or dpi not in prof.dpi_modes or count == 0 or speed == 0 \
+                or accel == 0:
+            return P.Result.BAD_ARGUMENT
+        k = prof.counts_per_inch // dpi
+        ramp = ramp_counts(speed, accel, k)
+        lo = first * k - ramp + self.count_offset
+        hi = (first + count - 1) * k + ramp + self.count_offset
+        if lo < 0 or hi > prof.rail_counts:
+            return P.Result.OUT_OF_RANGE
+        fp = self.fpga
+        fp.regs[P.REG_PASS_LO], fp.regs[P.REG_PASS_HI] = pass_id & 0xFFFF, pass_id >> 16
+        u = first & 0xFFFFFFFF
+        fp.regs[P.REG_FIRE_START_LO], fp.regs[P.REG_FIRE_START_HI] = u & 0xFFFF, u >> 16
+        fp.regs[P.REG_FIRE_COUNT_LO], fp.regs[P.REG_FIRE_COUNT_HI] = count & 0xFFFF, count >> 16
+        fp.flush()
+        self._pass_blocks_received = 0
+        self._move_times = []
+        self.line = None
+        self.line_done = False
+        self.line_cfg = dict(pass_id=pass_id, direction=direction, dpi=dpi, first=first,
+                             count=count, speed=speed, accel=accel, lo=lo, hi=hi)
+        self.log("set_line", **{k: v for k, v in self.line_cfg.items()})
+        return P.Result.OK
+
+    def start_line(self) -> P.Result:
+        cfg = self.line_cfg
+        fp = self.fpga
+        if cfg is None or fp.pass_id != cfg["pass_id"]:
+            return P.Result.BAD_STATE
+        if fp.forward != (cfg["direction"] == 0) or fp.dpi != cfg["dpi"] or not fp.we_en:
+            return P.Result.BAD_STATE
+        if not self.heads_configured():
+            return P.Result.HEADS_NOT_CONFIGURED
+        start, end = (cfg["lo"], cfg["hi"]) if cfg["direction"] == 0 else (cfg["hi"], cfg["lo"])
+        self._move_to(float(start))
+        move = Trapezoid(start - self.count_offset, end - self.count_offset, cfg["speed"], cfg["accel"])
+        self.fpga.firing = True
+        self.line_done = False
+        self.motion = P.Motion.PRINTING
+        self.line = LineRun(self, move, self.time)
+        self.line_cfg = None       # a line runs once
+        self.pump()
+        return P.Result.OK
+
+    def carriage_stop(self, counter_position: float, t: float) -> None:
+        self.position = counter_position + self.count_offset
+        self.time = max(self.time, t)
+        self.motion = P.Motion.IDLE
+        if self.line is not None and self.line.fault == P.Fault.NONE:
+            self.line_done = True
+        self.fpga.firing = False
+
+    # -- heads and media ------------------------------------------------------------------------
+    def load_head_config(self, digits: list[int]) -> None:
+        t0 = int(self.time * 1e9)
+        for h in self.heads:
+            trace = h.load_config(digits, t0)
+        self.config_traces.append(trace)
+        self.fpga.configured_mask = (1 << self.n_heads) - 1
+        self.time = trace.data_nconfig_rise_ns / 1e9
+        self.log("head_config", digits=len(digits), first=digits[:5])
+
+    def job_begin(self, job: int, x0: int, width: int, height: int, dpi: int, row_nm: int,
+                  y0: int) -> None:
+        if self.media:
+            self.media.close()
+        self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
+                        y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
+        path = self.media_path(job) if callable(self.media_path) else self.media_path
+        self.media = Media(width, height, dpi, 25.4e6 / row_nm,
+                           window_rows=self.profile.swath_rows + 256, path=path)
+        self.log("job_begin", **self.job)
+
+    def job_end(self, job: int) -> None:
+        if self.media:
+            self.media.close()
+            stats = dict(drops=[int(d) for d in self.media.drops], stray=self.media.stray,
+                         late=self.media.late, path=self.media.path)
+            self.jobs_done[job] = stats
+            self.log("job_end", job=job, **stats)
+        self.media = None
+        self.job = None
+
+    def _flush_media(self) -> None:
+        if self.media and self.job:
+            paper_nm = (self.paper_steps - self.job["paper0"]) * self.profile.feed_um_per_step * 1000
+            self.media.flush_below(int(math.floor(paper_nm / self.job["row_nm"])) - self.job["y0"])
+
+    def land_drops(self, head: int, columns: np.ndarray, bits: np.ndarray, forward: bool) -> None:
+        """Drops of one head for consecutive fires at these trigger columns."""
+        prof, job = self.profile, self.job
+        hd = self.heads[head]
+        hd.fires += columns.size
+        if hd.dead:
+            bits = bits.copy()
+            bits[:, sorted(hd.dead)] = 0
+        fi, nz = np.nonzero(bits)
+        if job is None or self.media is None:
+            if fi.size:
+                self.log("drops_without_job", head=head, drops=int(fi.size))
+            return
+        geo = prof.heads[head]
+        k = job["k"]
+        shift = 0 if forward else -prof.bidir_offset_columns.get(job["dpi"], 0) * k
+        x = columns[fi] * k + geo.x_counts + shift - job["x0"]
+        cols = x // k
+        paper_nm = (self.paper_steps - job["paper0"]) * prof.feed_um_per_step * 1000
+        slot = geo.y_rows + prof.heads_per_color * nz
+        rows = np.rint((paper_nm + slot * job["row_nm"]) / job["row_nm"]).astype(np.int64) - job["y0"]
+        self.media.land(geo.channel, rows, cols)

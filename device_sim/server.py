@@ -1,0 +1,150 @@
+"""The standalone emulator (`wideprint emulator`): the command channel on a pseudo-terminal
+(or a TCP port, for pyserial's socket:// URLs) and the data channel on TCP, served by one
+selector loop so the Printer is only ever touched from one thread."""
+
+from __future__ import annotations
+
+import os
+import selectors
+import socket
+import tty
+
+from .printer import Printer
+
+
+class EmulatorServer:
+    def __init__(self, printer: Printer, host: str = "127.0.0.1", data_port: int = 0,
+                 serial_tcp_port: int | None = None):
+        self.printer = printer
+        self.sel = selectors.DefaultSelector()
+        self.running = False
+        # command channel: a pty, or TCP when serial_tcp_port is given
+        self.pty_path = None
+        self._serial_conn: socket.socket | None = None
+        if serial_tcp_port is None:
+            self.master, slave = os.openpty()
+            tty.setraw(slave)
+            self.pty_path = os.ttyname(slave)
+            self._slave = slave          # kept open so the pty survives host reconnects
+            os.set_blocking(self.master, False)
+            self.sel.register(self.master, selectors.EVENT_READ, self._on_pty)
+            self.serial_listener = None
+        else:
+            self.master = None
+            self.serial_listener = self._listen(host, serial_tcp_port, self._accept_serial)
+        self.data_listener = self._listen(host, data_port, self._accept_data)
+        self._data_conn: socket.socket | None = None
+
+    def _listen(self, host, port, handler) -> socket.socket:
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind((host, port))
+        s.listen(1)
+        s.setblocking(False)
+        self.sel.register(s, selectors.EVENT_READ, handler)
+        return s
+
+    @property
+    def data_port(self) -> int:
+        return self.data_listener.getsockname()[1]
+
+    @property
+    def serial_spec(self) -> str:
+        if self.pty_path:
+            return self.pty_path
+        return "socket://%s:%d" % self.serial_listener.getsockname()
+
+    @property
+    def device_spec(self) -> str:
+        host = self.data_listener.getsockname()[0]
+        return f"serial={self.serial_spec},data=tcp://{host}:{self.data_port}"
+
+    # -- handlers ---------------------------------------------------------------------------
+    def _on_pty(self, fd) -> None:
+        try:
+            data = os.read(fd, 65536)
+        except BlockingIOError:
+            return
+        except OSError:
+            return
+        out = self.printer.serial_in(data)
+        if out:
+            os.write(fd, out)
+
+    def _accept_serial(self, sock) -> None:
+        conn, _ = sock.accept()
+        conn.setblocking(False)
+        if self._serial_conn:
+            self.sel.unregister(self._serial_conn)
+            self._serial_conn.close()
+        self._serial_conn = conn
+        self.sel.register(conn, selectors.EVENT_READ, self._on_serial_sock)
+
+    def _on_serial_sock(self, conn) -> None:
+        try:
+            data = conn.recv(65536)
+        except BlockingIOError:
+            return
+        if not data:
+            self.sel.unregister(conn)
+            conn.close()
+            self._serial_conn = None
+            return
+        out = self.printer.serial_in(data)
+        if out:
+            conn.sendall(out)
+
+    def _accept_data(self, sock) -> None:
+        conn, _ = sock.accept()
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if self._data_conn:
+            self._drop_data()
+        conn.setblocking(False)
+        self._data_conn = conn
+        self.printer.data_link_up()
+        self.sel.register(conn, selectors.EVENT_READ, self._on_data)
+
+    def _drop_data(self) -> None:
+        conn = self._data_conn
+        self._data_conn = None
+        self.sel.unregister(conn)
+        conn.close()
+        self.printer.data_link_lost()
+
+    def _on_data(self, conn) -> None:
+        try:
+            data = conn.recv(1 << 20)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._drop_data()
+            return
+        self.printer.data_in(data)
+        if not self.printer.link_alive:      # an injected link drop
+            self._drop_data()
+            return
+        out = self.printer.data_out()
+        if out:
+            conn.setblocking(True)
+            conn.sendall(out)
+            conn.setblocking(False)
+
+    def serve_forever(self, poll: float = 0.5) -> None:
+        self.running = True
+        while self.running:
+            for key, _ in self.sel.select(poll):
+                key.data(key.fileobj)
+
+    def stop(self) -> None:
+        self.running = False
+
+    def close(self) -> None:
+        self.printer.close()
+        for s in (self.data_listener, self.serial_listener, self._data_conn, self._serial_conn):
+            if s is not None:
+                s.close()
+        if self.master is not None:
+            os.close(self.master)
+            os.close(self._slave)

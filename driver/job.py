@@ -1,0 +1,243 @@
+"""The print job state machine (docs/driver.md).
+
+connect -> (head configuration) -> enable -> home -> measure paper -> place the job ->
+per pass: feed to the pass's paper position, SET_LINE, DIR/DPI/WE_EN, preload the FIFOs,
+START_LINE, stream on FIFO demand, wait for LINE_DONE, WE_EN off -> park -> report.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import time
+from dataclasses import dataclass, field
+
+from . import protocol as P
+from .device import Device
+from .link import DeviceError, LinkError
+from .stream import PassStreamer, StreamError
+from ..rip.pipeline import RipJob
+from ..rip.swath import PassData
+
+log = logging.getLogger("wideprint.job")
+
+HEAD_MASK_ALL = 0xFF
+
+
+class JobError(RuntimeError):
+    """A job that cannot be printed or was stopped by a device fault; the message says why
+    and where (pass, column, head)."""
+
+    def __init__(self, message: str, fault: int = 0, pass_id: int | None = None):
+        super().__init__(message)
+        self.fault, self.pass_id = fault, pass_id
+
+
+@dataclass
+class JobReport:
+    file: str
+    state: str = "queued"
+    passes_total: int = 0
+    passes_printed: int = 0
+    passes_skipped: int = 0
+    drops: list = field(default_factory=lambda: [0, 0, 0, 0])
+    ink_ml: list = field(default_factory=lambda: [0.0] * 4)
+    width_dots: int = 0
+    height_rows: int = 0
+    area_m2: float = 0.0
+    retries: int = 0
+    min_fifo_words: int | None = None
+    wall_s: float = 0.0
+    message: str = ""
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def fault_message(st: P.Status, profile) -> str:
+    text = P.FAULT_TEXT.get(P.Fault(st.fault), f"fault 0x{st.fault:02X}") \
+        if st.fault in P.Fault._value2member_map_ else f"fault 0x{st.fault:02X}"
+    where = []
+    if st.fault_head != 0xFF and st.fault_head < len(profile.heads):
+        where.append(f"head {profile.heads[st.fault_head].name}")
+    if st.fault in (P.Fault.FIFO_UNDERRUN, P.Fault.HEAD_DATA, P.Fault.OVERSPEED,
+                    P.Fault.DATA_LINK_LOST, P.Fault.HEAD_OVERTEMP, P.Fault.LIMIT_RIGHT,
+                    P.Fault.LIMIT_LEFT, P.Fault.ENCODER, P.Fault.DATA_SEQUENCE, P.Fault.DATA_CRC):
+        where.append(f"pass {st.fault_pass}")
+        where.append(f"column {st.fault_column}")
+    return text + (f" ({', '.join(where)})" if where else "")
+
+
+class PrintJob:
+    def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None):
+        self.dev = device
+        self.rip = rip
+        self.job_id = job_id
+        self.profile = device.profile
+        self.report = JobReport(file=rip.path)
+        self.on_event = on_event or (lambda kind, **kw: None)
+        self.poll_interval = 0.0 if device.emulator is not None else 0.01
+
+    # -- device steps ---------------------------------------------------------------------
+    def _wait(self, done, what: str, timeout: float = 120.0) -> P.Status:
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.dev.link.status()
+            if st.fault != P.Fault.NONE:
+                raise JobError(f"{what}: {fault_message(st, self.profile)}", st.fault, st.fault_pass)
+            if done(st):
+                return st
+            if time.monotonic() > deadline:
+                raise JobError(f"{what}: the printer did not finish within {timeout:.0f} s")
+            if self.poll_interval:
+                time.sleep(self.poll_interval)
+
+    def prepare(self) -> P.Status:
+        link = self.dev.link
+        self.dev.connect()
+        st = link.status()
+        if st.fault != P.Fault.NONE:
+            raise JobError(f"printer reports a fault: {fault_message(st, self.profile)}", st.fault)
+        if not st.flags & P.FLAG_HEADS_CONFIGURED:
+            self.on_event("state", state="loading head configuration")
+            self.dev.load_head_config()
+        if not st.flags & P.FLAG_ENABLED:
+            link.command(P.Op.ENABLE, b"\x01")
+        if not st.flags & P.FLAG_HOMED:
+            self.on_event("state", state="homing")
+            link.command(P.Op.HOME)
+            self._wait(lambda s: s.flags & P.FLAG_HOMED and s.motion == P.Motion.IDLE, "homing")
+        if not st.flags & P.FLAG_PAPER_MEASURED:
+            self.on_event("state", state="measuring paper")
+            link.command(P.Op.MEASURE_PAPER)
+            self._wait(lambda s: s.flags & P.FLAG_PAPER_MEASURED and s.motion == P.Motion.IDLE,
+                       "measuring the paper")
+        return link.status()
+
+    def place(self) -> int:
+        """x0: encoder count of image column 0, inside the measured paper; refuses a job
+        that does not fit, before anything prints."""
+        present, left, right = struct.unpack(P.PAPER_FMT, self.dev.link.command(P.Op.GET_PAPER))
+        if not present:
+            raise JobError("no paper loaded", P.Fault.PAPER_OUT)
+        k = self.profile.k(self.rip.settings.dpi)
+        kmax = max(self.profile.k(d) for d in self.profile.dpi_modes)
+        margin = int(round(float(self.profile.raw["paper"]["margin_mm"]) / 25.4 *
+                           self.profile.counts_per_inch))
+        x0 = -(-(left + margin) // kmax) * kmax
+        width_counts = self.rip.width * k
+        if x0 + width_counts > right - margin:
+            paper_mm = (right - left) / self.profile.counts_per_inch * 25.4
+            job_mm = width_counts / self.profile.counts_per_inch * 25.4
+            raise JobError(f"{self.rip.path}: image is {job_mm:.0f} mm wide at "
+                           f"{self.rip.settings.dpi} dpi but the paper is {paper_mm:.0f} mm "
+                           f"(with {self.profile.raw['paper']['margin_mm']} mm margins)")
+        return x0
+
+    def feed_to(self, target_steps: int) -> None:
+        link = self.dev.link
+        st = link.status()
+        delta = target_steps - st.paper_steps
+        if delta:
+            f = self.profile.raw["feed"]
+            prof = 1 if f.get("profile") == "sigmoid" else 0
+            link.command(P.Op.FEED, struct.pack(P.FEED_FMT, delta, prof, int(f["max_steps_s"]),
+                                                int(f["accel_steps_s2"])))
+            st = self._wait(lambda s: s.motion == P.Motion.IDLE, "feeding paper")
+        if st.paper_steps != target_steps:
+            raise JobError(f"paper is at step {st.paper_steps}, expected {target_steps}: "
+                           f"feed error", P.Fault.PAPER_OUT)
+
+    def print_pass(self, pd: PassData, x0: int) -> None:
+        link, prof = self.dev.link, self.profile
+        dpi = self.rip.settings.dpi
+        k = prof.k(dpi)
+        first = x0 // k + pd.first_column
+        speed, accel = prof.speed_counts_s(dpi), prof.accel_counts_s2()
+        link.command(P.Op.SET_LINE, struct.pack(P.SET_LINE_FMT, pd.index, pd.direction, dpi,
+                                                first, pd.fires, speed, accel))
+        link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
+        link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
+        link.write_reg(P.REG_WE_EN, 1)
+        info = self.dev.info or {}
+        streamer = PassStreamer(self.dev.data, pd.index, pd.words,
+                                info.get("block_fires", prof.block_fires),
+                                info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
+        streamer.preload()
+        link.command(P.Op.START_LINE)
+        deadline = time.monotonic() + 60 + pd.fires / 1000
+        while True:
+            streamer.pump(0.002)
+            st = link.status()
+            if st.fault != P.Fault.NONE:
+                raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
+            if streamer.done and st.flags & P.FLAG_LINE_DONE and st.motion == P.Motion.IDLE:
+                break
+            if time.monotonic() > deadline:
+                raise JobError(f"pass {pd.index}: the line did not finish")
+            if self.poll_interval:
+                time.sleep(self.poll_interval)
+        if st.fires_done != pd.fires:
+            raise JobError(f"pass {pd.index}: {st.fires_done} of {pd.fires} columns fired")
+        link.write_reg(P.REG_WE_EN, 0)
+        if streamer.min_fifo_words is not None:
+            m = self.report.min_fifo_words
+            self.report.min_fifo_words = streamer.min_fifo_words if m is None else min(m, streamer.min_fifo_words)
+
+    # -- the whole job -------------------------------------------------------------------------
+    def run(self) -> JobReport:
+        t0 = time.monotonic()
+        rep, prof, rip = self.report, self.profile, self.rip
+        rep.state = "printing"
+        rep.width_dots, rep.height_rows = rip.width, rip.height
+        try:
+            self.prepare()
+            x0 = self.place()
+            planner = rip.planner()
+            rep.passes_total = planner.total_passes
+            link = self.dev.link
+            link.command(P.Op.JOB_BEGIN, struct.pack(
+                P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height, rip.settings.dpi,
+                prof.row_nm, planner.y0_rows))
+            paper0 = link.status().paper_steps
+            top0 = planner.top_row(0)
+            for pd in rip.passes(planner):
+                self.feed_to(paper0 + prof.feed_steps_for_rows(pd.top_row - top0))
+                self.on_event("pass", index=pd.index, total=planner.total_passes,
+                              direction=pd.direction, fires=pd.fires)
+                self.print_pass(pd, x0)
+                rep.passes_printed += 1
+                for c in range(4):
+                    rep.drops[c] += int(pd.dots[c])
+            # feed the last rows out past the heads, then park
+            self.feed_to(paper0 + prof.feed_steps_for_rows(
+                planner.top_row(planner.total_passes - 1) - top0 + prof.swath_rows))
+            link.command(P.Op.JOB_END, struct.pack("<I", self.job_id))
+            link.command(P.Op.PARK)
+            rep.passes_skipped = rep.passes_total - rep.passes_printed
+            rep.state = "done"
+        except (JobError, LinkError, DeviceError, StreamError) as exc:
+            rep.state = "failed"
+            rep.message = str(exc)
+            self._safe_stop()
+            raise JobError(str(exc), getattr(exc, "fault", 0), getattr(exc, "pass_id", None)) from exc
+        finally:
+            rep.retries = self.dev.link.retries
+            rep.wall_s = time.monotonic() - t0
+            pl = prof.drop_volume_pl
+            rep.ink_ml = [round(d * pl * 1e-9, 6) for d in rep.drops]
+            k = prof.k(rip.settings.dpi)
+            rep.area_m2 = (rip.width * k / prof.counts_per_inch * 0.0254) * \
+                (rip.height * prof.row_um * 1e-6)
+        return rep
+
+    def _safe_stop(self) -> None:
+        """After a failure: heads off, carriage stopped; errors here are secondary."""
+        try:
+            self.dev.link.write_reg(P.REG_WE_EN, 0)
+        except Exception:  # noqa: BLE001 - the original error is what the operator needs
+            pass
+        try:
+            self.dev.link.command(P.Op.STOP)
+        except Exception:  # noqa: BLE001
+            pass

@@ -1,0 +1,74 @@
+"""The data channel, host side: a pass's nozzle words cut into blocks and sent on DMA-ring
+credit (docs/protocol.md section 3.2)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import protocol as P
+
+
+class StreamError(ConnectionError):
+    pass
+
+
+def pass_blocks(pass_id: int, words: np.ndarray, block_fires: int, head_mask: int):
+    """Yield (first_fire, encoded block) for a pass's words (heads, fires, 8)."""
+    fires = words.shape[1]
+    for first in range(0, fires, block_fires):
+        part = words[:, first:first + block_fires]
+        yield first, P.encode_block(pass_id, first, head_mask, part)
+
+
+class PassStreamer:
+    """Sends one pass's blocks, never more than `ring` ahead of the FPGA's reports."""
+
+    def __init__(self, data, pass_id: int, words: np.ndarray, block_fires: int, ring: int,
+                 head_mask: int):
+        self.data = data
+        self.pass_id = pass_id
+        self.blocks = list(pass_blocks(pass_id, words, block_fires, head_mask))
+        self.ring = ring
+        self.sent = 0
+        self.acked = 0
+        self.min_fifo_words: int | None = None
+        self.decoder = P.ReportDecoder()
+        self.last_report: P.Report | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.sent == len(self.blocks)
+
+    def _reports(self, timeout: float) -> None:
+        for rep in self.decoder.feed(self.data.recv(timeout)):
+            if rep.pass_id != self.pass_id:
+                continue
+            self.last_report = rep
+            self.acked = max(self.acked, rep.blocks)
+            level = min(rep.fifo)
+            self.min_fifo_words = level if self.min_fifo_words is None else min(self.min_fifo_words, level)
+
+    def pump(self, timeout: float = 0.0) -> None:
+        """Send every block the ring has room for; read the reports that arrived."""
+        self._reports(0.0)
+        while self.sent < len(self.blocks) and self.sent - self.acked < self.ring:
+            try:
+                self.data.send(self.blocks[self.sent][1])
+            except (ConnectionError, OSError) as exc:
+                raise StreamError(f"data link: {exc}") from exc
+            self.sent += 1
+            self._reports(0.0)
+        if self.sent < len(self.blocks) and timeout:
+            self._reports(timeout)
+
+    def preload(self, timeout: float = 5.0) -> None:
+        """Fill the ring and the FIFOs before the carriage moves."""
+        deadline = time.monotonic() + timeout
+        while True:
+            self.pump(0.01)
+            if self.done or self.sent - self.acked >= self.ring:
+                return
+            if time.monotonic() > deadline:
+                raise StreamError("the printer did not take the preload data")

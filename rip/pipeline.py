@@ -1,0 +1,102 @@
+"""The RIP as one streaming pipeline: file -> bands -> CMYK -> halftone -> passes.
+
+Pure: the same file and settings always give the same bits.  Every stage works on bands
+of `band_rows` rows, so memory is bounded by the band and the pass window, never by the
+image length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from .color import Separator
+from .halftone import METHODS, Halftoner
+from .load import ImageSource, open_image
+from .planes import PlanesWriter
+from .profile import COLORS, Profile, load_profile
+from .swath import PassData, PassPlanner
+
+
+@dataclass
+class RipSettings:
+    dpi: int = 300
+    passes: int = 1
+    bidir: bool = False
+    dither: str = "fs"
+    ink_limit: float | None = None
+    input_icc: str | None = None
+    output_icc: str | None = None
+    intent: str = "relative"
+    band_rows: int = 256
+
+    def check(self, profile: Profile) -> None:
+        if self.dither not in METHODS:
+            raise ValueError(f"dither must be one of {', '.join(METHODS)}, not {self.dither!r}")
+        profile.k(self.dpi)
+
+
+def profile_curves(profile: Profile) -> np.ndarray | None:
+    """(4, 256) uint8 linearisation LUT from the profile's [curves], None if identity."""
+    raw = profile.raw.get("curves", {})
+    lut = np.empty((4, 256), np.uint8)
+    x = np.arange(256)
+    for c, name in enumerate(COLORS):
+        pts = np.asarray(raw.get(name, [[0, 0], [255, 255]]), dtype=np.float64)
+        lut[c] = np.clip(np.rint(np.interp(x, pts[:, 0], pts[:, 1])), 0, 255)
+    return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
+
+
+@dataclass
+class RipJob:
+    """One file ripped for one printer: the image area in device dots and the passes.
+    1 image pixel = 1 device dot (columns at the dpi mode, rows at the profile's row pitch)."""
+    path: str
+    settings: RipSettings = field(default_factory=RipSettings)
+    profile: Profile = field(default_factory=load_profile)
+
+    def __post_init__(self):
+        self.settings.check(self.profile)
+        self.source: ImageSource = open_image(self.path)
+        self.width, self.height = self.source.width, self.source.height
+
+    @property
+    def dpi_y(self) -> float:
+        return 25.4e3 / self.profile.row_um
+
+    def halftone_bands(self) -> Iterator[np.ndarray]:
+        """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
+        s = self.settings
+        sep = Separator(self.source.colorspace, self.source.depth,
+                        embedded_icc=self.source.icc, input_icc=s.input_icc,
+                        output_icc=s.output_icc, intent=s.intent, ink_limit=s.ink_limit,
+                        curves=profile_curves(self.profile))
+        ht = Halftoner(s.dither, self.width, channels=4)
+        for band in self.source.bands(s.band_rows):
+            yield ht.process(sep.convert(band))
+
+    def planner(self) -> PassPlanner:
+        s = self.settings
+        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir)
+
+    def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
+        planner = planner or self.planner()
+        for band in self.halftone_bands():
+            yield from planner.feed(band)
+        yield from planner.finish()
+
+    def write_planes(self, out: str | Path) -> np.ndarray:
+        """The halftone the RIP intends, as a planes TIFF; returns dots per colour."""
+        dots = np.zeros(4, np.int64)
+        with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
+                          description=f"wideprint planes of {Path(self.path).name}") as w:
+            for band in self.halftone_bands():
+                dots += band.reshape(-1, 4).sum(axis=0, dtype=np.int64)
+                w.write(band)
+        return dots
+
+    def close(self) -> None:
+        self.source.close()

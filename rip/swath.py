@@ -1,0 +1,198 @@
+"""Swath and pass planner: halftone rows -> per-pass, per-head 128-bit nozzle words.
+
+The geometry is docs/geometry.md; in short, with N passes and A rows of paper advance:
+- a colour's heads print swath slots 0 .. swath_rows-1; only the profile's usable run
+  [s0, s0 + N*A) is used (nozzles 0 and 127 never fire);
+- pass p has image row T_p = (p - N + 1) * A - s0 under slot 0, so every image row is
+  under the usable run in exactly N consecutive passes p = floor(r/A) + j, j = 0 .. N-1,
+  at slot (r mod A) + (N - 1 - j) * A + s0;
+- the pass mask gives each dot one j; a dot whose slot is a dead nozzle moves to the next
+  live j (nozzle-out compensation), so no dot is lost and none is printed twice;
+- head h fires image column x at trigger column x - x_h / k (k = counts per column);
+  reverse passes fire in descending columns, shifted by the profile's bidir offset.
+Memory: a rolling window of N*A rows plus one input band.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .profile import COLORS, Profile, ProfileError
+
+PASS_COUNTS = (1, 2, 3, 4, 6, 8)
+PASS_MASKS = ("checker",)
+
+
+@dataclass
+class PassData:
+    index: int            # pass number in the job, 0-based (blank passes keep their number)
+    direction: int        # 0 forward, 1 reverse
+    top_row: int          # image row under swath slot 0
+    first_column: int     # lowest trigger column, relative to the job origin x0 / k
+    words: np.ndarray     # uint16 (heads, fires, 8), firing order
+    dots: np.ndarray      # drops per colour (4,)
+
+    @property
+    def fires(self) -> int:
+        return self.words.shape[1]
+
+
+class PassPlanner:
+    def __init__(self, profile: Profile, width: int, height: int, dpi: int, passes: int = 1,
+                 bidir: bool = False, mask: str = "checker"):
+        if passes not in PASS_COUNTS:
+            raise ValueError(f"passes must be one of {PASS_COUNTS}, not {passes}")
+        if mask not in PASS_MASKS:
+            raise ValueError(f"pass mask must be one of {PASS_MASKS}, not {mask!r}")
+        self.profile, self.width, self.height, self.dpi = profile, width, height, dpi
+        self.k = profile.k(dpi)
+        self.n = passes
+        self.bidir = bidir
+        s0, s1 = profile.usable_slots()
+        self.s0 = s0
+        self.advance = (s1 - s0) // passes
+        if self.advance < 1:
+            raise ProfileError(f"{profile.path}: too few usable nozzles for {passes} passes")
+        self.total_passes = -(-height // self.advance) + passes - 1
+        self._slot_table = profile.slot_table()
+        self._remap = self._dead_nozzle_remap()
+        hpc = profile.heads_per_color
+        # per head: nozzle -> slot
+        self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
+        self._head_cols = [h.x_counts // self.k for h in profile.heads]
+        self._bidir_offset = profile.bidir_offset_columns.get(dpi, 0)
+        # rolling window of halftone rows: rows [self._base, self._base + len)
+        self._buf = np.zeros((0, width, 4), np.uint8)
+        self._base = 0
+        self._next_pass = 0
+        self._printed = 0
+        self._rows_in = 0
+
+    # -- geometry helpers (also used by tests and the driver) --------------------------
+    def top_row(self, p: int) -> int:
+        return (p - self.n + 1) * self.advance - self.s0
+
+    @property
+    def y0_rows(self) -> int:
+        """Paper row of image row 0, counted from swath slot 0 at the first pass."""
+        return -self.top_row(0)
+
+    def _dead_nozzle_remap(self) -> np.ndarray:
+        """(4, A, N) -> the j that prints a dot whose mask says j, for rows r mod A."""
+        n, a = self.n, self.advance
+        rho = np.arange(a)[:, None]
+        j = np.arange(n)[None, :]
+        slots = rho + (n - 1 - j) * a + self.s0                    # (A, N)
+        alive = self._slot_table[:, slots, 0] >= 0                   # (4, A, N)
+        remap = np.empty((len(COLORS), a, n), np.int16)
+        for c in range(len(COLORS)):
+            for r in range(a):
+                live = np.flatnonzero(alive[c, r])
+                if live.size == 0:
+                    dead = [f"{self.profile.heads[h].name}:{z}" for h, z in
+                            (tuple(self._slot_table_dead(c, int(s))) for s in slots[r])]
+                    raise ProfileError(
+                        f"{self.profile.path}: dead nozzles {', '.join(dead)} leave colour "
+                        f"{COLORS[c]} rows unprintable with {n} pass(es); use more passes")
+                for jj in range(n):
+                    # first live j at or after jj, cyclically
+                    later = live[live >= jj]
+                    remap[c, r, jj] = later[0] if later.size else live[0]
+        return remap
+
+    def _slot_table_dead(self, c: int, slot: int) -> tuple[int, int]:
+        for h in self.profile.heads:
+            if h.channel == c:
+                z, rem = divmod(slot - h.y_rows, self.profile.heads_per_color)
+                if rem == 0 and 0 <= z < self.profile.nozzles:
+                    return h.index, z
+        return -1, -1
+
+    def assignment(self, rows: np.ndarray) -> np.ndarray:
+        """(len(rows), W, 4) int16: which j (0..N-1) prints each dot of these rows."""
+        x = np.arange(self.width)
+        m = (x[None, :] + rows[:, None]) % self.n                    # checker pass mask
+        rho = (rows % self.advance)[:, None]
+        out = np.empty((rows.size, self.width, 4), np.int16)
+        for c in range(4):
+            out[:, :, c] = self._remap[c][rho, m]
+        return out
+
+    # -- streaming ----------------------------------------------------------------------
+    def feed(self, band: np.ndarray) -> list[PassData]:
+        """Add the next halftone rows (h, W, 4) of 0/1; returns the passes now complete."""
+        if band.shape[1:] != (self.width, 4):
+            raise ValueError(f"band must be (h, {self.width}, 4)")
+        self._buf = np.concatenate([self._buf, band.astype(np.uint8, copy=False)])
+        self._rows_in += band.shape[0]
+        return self._emit(final=False)
+
+    def finish(self) -> list[PassData]:
+        if self._rows_in != self.height:
+            raise ValueError(f"got {self._rows_in} rows, expected {self.height}")
+        return self._emit(final=True)
+
+    def _emit(self, final: bool) -> list[PassData]:
+        out = []
+        while self._next_pass < self.total_passes:
+            p = self._next_pass
+            need = min((p + 1) * self.advance, self.height)
+            if self._rows_in < need and not final:
+                break
+            data = self._build(p)
+            self._next_pass += 1
+            if data is not None:
+                out.append(data)
+            # drop rows no later pass needs
+            keep_from = max(0, (self._next_pass - self.n + 1) * self.advance)
+            if keep_from > self._base:
+                drop = keep_from - self._base
+                self._buf = self._buf[drop:]
+                self._base = keep_from
+        return out
+
+    def _build(self, p: int) -> PassData | None:
+        top = self.top_row(p)
+        lo = max(0, top + self.s0)
+        hi = min(self.height, top + self.s0 + self.n * self.advance)
+        if hi <= lo:
+            return None
+        rows = np.arange(lo, hi)
+        window = self._buf[lo - self._base:hi - self._base]
+        assign = self.assignment(rows)
+        j_of_row = p - rows // self.advance                           # (rows,)
+        mine = window.astype(bool) & (assign == j_of_row[:, None, None])   # dots of this pass
+        if not mine.any():
+            return None
+        cols_any = np.flatnonzero(mine.any(axis=(0, 2)))
+        xmin, xmax = int(cols_any[0]), int(cols_any[-1])
+        heads = self.profile.heads
+        t_lo = min(xmin - c for c in self._head_cols)
+        t_hi = max(xmax - c for c in self._head_cols)
+        fires = t_hi - t_lo + 1
+        words = np.zeros((len(heads), fires, 8), np.uint16)
+        dots = np.zeros(4, np.int64)
+        for h in heads:
+            slots = self._head_slots[h.index]
+            r = top + slots
+            live = (self._slot_table[h.channel, np.clip(slots, 0, self._slot_table.shape[1] - 1), 0]
+                    == h.index) & (slots >= self.s0) & (slots < self.s0 + self.n * self.advance) \
+                & (r >= lo) & (r < hi)
+            nz = np.flatnonzero(live)
+            if nz.size == 0:
+                continue
+            bits = np.zeros((fires, self.profile.nozzles), np.uint8)
+            t0 = xmin - self._head_cols[h.index] - t_lo
+            seg = mine[r[nz] - lo, xmin:xmax + 1, h.channel]          # (len(nz), span)
+            bits[t0:t0 + seg.shape[1], nz] = seg.T
+            dots[h.channel] += int(seg.sum())
+            words[h.index] = np.packbits(bits, axis=1, bitorder="little").view("<u2")
+        direction = (self._printed % 2) if self.bidir else 0
+        self._printed += 1
+        first = t_lo
+        if direction == 1:
+            words = words[:, ::-1]
+            first += self._bidir_offset
+        return PassData(p, direction, top, first, np.ascontiguousarray(words), dots)
