@@ -103,6 +103,7 @@ def cmd_print(args) -> int:
         print(f"wideprint print: {exc}", file=sys.stderr)
         return EXIT_DEVICE
     reports, failed = [], 0
+    say = sys.stderr if args.json else sys.stdout     # --json keeps stdout machine-readable
     try:
         for i, f in enumerate(files):
             media[i + 1] = _media_path(args.media_out, i, len(files))
@@ -123,7 +124,7 @@ def cmd_print(args) -> int:
                 print(f"{f}: printed {rep['passes_printed']} passes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
-                      + (f" -> {rep['media']}" if rep["media"] else ""))
+                      + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
             except (JobError, ImageError) as exc:
                 failed += 1
                 rep = job.report.as_dict()

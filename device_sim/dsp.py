@@ -55,7 +55,7 @@ class Dsp:
             payload = bytes((P.Result.BAD_LENGTH,))
         response = P.Frame(frame.seq, P.Kind.RESPONSE, frame.op, payload).encode()
         self.last_seq, self.last_response = frame.seq, response
-        self.printer.log("command", seq=frame.seq, op=_op_name(frame.op),
+        self.printer.log("command", seq=frame.seq, op=P.op_name(frame.op),
                          payload=frame.payload.hex(), result=payload[0])
         return response
 
@@ -71,6 +71,8 @@ class Dsp:
             if payload:
                 raise struct.error("no payload expected")
 
+        if op not in P.Op._value2member_map_:
+            return res(P.Result.UNKNOWN_OPCODE)
         if op == P.Op.IDENTIFY:
             need_empty()
             prof = pr.profile
@@ -200,10 +202,3 @@ class Dsp:
             code = pr.start_line()
             return bytes((code,)) + (struct.pack("<I", pr.fpga.pass_id) if code == P.Result.OK else b"")
         return res(P.Result.UNKNOWN_OPCODE)
-
-
-def _op_name(op: int) -> str:
-    try:
-        return P.Op(op).name
-    except ValueError:
-        return f"0x{op:02X}"

@@ -29,7 +29,7 @@ class DeviceError(RuntimeError):
             rname = P.Result(result).name
         except ValueError:
             rname = f"result 0x{result:02X}"
-        super().__init__(f"printer refused {P.Op(op).name}: {rname}")
+        super().__init__(f"printer refused {P.op_name(op)}: {rname}")
 
 
 class CommandLink:
@@ -79,9 +79,9 @@ class CommandLink:
             if result != P.Result.OK:
                 raise DeviceError(op, result)
             if op in ECHOED and data[:len(payload)] != payload:
-                raise LinkError(f"{P.Op(op).name}: the printer echoed different parameters")
+                raise LinkError(f"{P.op_name(op)}: the printer echoed different parameters")
             return data
-        raise LinkError(f"{P.Op(op).name}: no valid answer after {self.tries} tries")
+        raise LinkError(f"{P.op_name(op)}: no valid answer after {self.tries} tries")
 
     def _await(self, seq: int, op: int, sent: int) -> P.Frame | None:
         deadline = time.monotonic() + self.timeout + self._frame_time(sent + 64)

@@ -58,6 +58,13 @@ class Op(enum.IntEnum):
     PING = 0x16
 
 
+def op_name(op: int) -> str:
+    try:
+        return Op(op).name
+    except ValueError:
+        return f"0x{op:02X}"
+
+
 class Result(enum.IntEnum):
     OK = 0x00
     UNKNOWN_OPCODE = 0x01

@@ -1,0 +1,36 @@
+# Two commands do all set-up on a fresh machine (README):
+#   make demo   - print the bundled sample on the emulator, write the media and a job report
+#   make test   - install the test dependencies and run the whole suite
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    := out
+SAMPLE := resources/samples/sample.tif
+
+.PHONY: demo test install bench clean
+
+$(STAMP): setup.cfg pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test,gui]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p $(OUT)
+	$(BIN)/wideprint print $(SAMPLE) --device emulator --media-out $(OUT)/media.tif \
+	    --report $(OUT)/report.json --event-log $(OUT)/events.jsonl
+	$(BIN)/wideprint rip $(SAMPLE) -o $(OUT)/planes.tif
+	$(BIN)/python -m wideprint.app.compare $(OUT)/media.tif $(OUT)/planes.tif
+	@echo "demo: media $(OUT)/media.tif, report $(OUT)/report.json, events $(OUT)/events.jsonl"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+bench: $(STAMP)
+	$(BIN)/python bench/run.py
+
+clean:
+	rm -rf $(OUT) .pytest_cache

@@ -1,0 +1,31 @@
+import os
+import sys
+from pathlib import Path
+
+# Qt must never look for a display in the test run (PySide6 aborts without one).
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import numpy as np
+import pytest
+import tifffile
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def profile():
+    from wideprint.rip.profile import load_profile
+    return load_profile()
+
+
+def write_cmyk_tiff(path, planes01: np.ndarray) -> Path:
+    """A CMYK TIFF whose channels hold only 0 and 255, from 0/1 planes (h, w, 4)."""
+    tifffile.imwrite(path, (planes01 * 255).astype(np.uint8), photometric="separated")
+    return Path(path)
+
+
+def random_planes(h: int, w: int, density: float = 0.3, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (rng.random((h, w, 4)) < density).astype(np.uint8)
