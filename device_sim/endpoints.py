@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 from .printer import Printer
 
@@ -74,6 +75,8 @@ class InProcessData:
     def recv(self, timeout: float = 0.0) -> bytes:
         with self.lock:
             self._rx += self.printer.data_out()
+        if not self._rx and timeout > 0:
+            time.sleep(min(timeout, 0.0005))     # the device answers synchronously; don't spin
         out = bytes(self._rx)
         self._rx.clear()
         return out

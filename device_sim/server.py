@@ -70,6 +70,7 @@ class EmulatorServer:
         out = self.printer.serial_in(data)
         if out:
             os.write(fd, out)
+        self._flush_data_out()
 
     def _accept_serial(self, sock) -> None:
         conn, _ = sock.accept()
@@ -93,6 +94,7 @@ class EmulatorServer:
         out = self.printer.serial_in(data)
         if out:
             conn.sendall(out)
+        self._flush_data_out()
 
     def _accept_data(self, sock) -> None:
         conn, _ = sock.accept()
@@ -125,11 +127,19 @@ class EmulatorServer:
         if not self.printer.link_alive:      # an injected link drop
             self._drop_data()
             return
+        self._flush_data_out()
+
+    def _flush_data_out(self) -> None:
+        """FPGA reports go out on the data connection, whichever input caused them."""
         out = self.printer.data_out()
-        if out:
-            conn.setblocking(True)
-            conn.sendall(out)
-            conn.setblocking(False)
+        if out and self._data_conn is not None:
+            self._data_conn.setblocking(True)
+            try:
+                self._data_conn.sendall(out)
+            except OSError:
+                self._drop_data()
+                return
+            self._data_conn.setblocking(False)
 
     def serve_forever(self, poll: float = 0.5) -> None:
         self.running = True

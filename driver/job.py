@@ -165,24 +165,34 @@ class PrintJob:
                                 info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         streamer.preload()
         link.command(P.Op.START_LINE)
-        deadline = time.monotonic() + 60 + pd.fires / 1000
-        while True:
-            streamer.pump(0.002)
-            st = link.status()
-            if st.fault != P.Fault.NONE:
-                raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
-            if streamer.done and st.flags & P.FLAG_LINE_DONE and st.motion == P.Motion.IDLE:
-                break
-            if time.monotonic() > deadline:
-                raise JobError(f"pass {pd.index}: the line did not finish")
-            if self.poll_interval:
-                time.sleep(self.poll_interval)
+        streamer.start()
+        try:
+            st = self._watch_line(pd, streamer)
+        finally:
+            streamer.stop()
+        if streamer.error is not None:
+            raise StreamError(f"pass {pd.index}: {streamer.error}")
         if st.fires_done != pd.fires:
             raise JobError(f"pass {pd.index}: {st.fires_done} of {pd.fires} columns fired")
         link.write_reg(P.REG_WE_EN, 0)
         if streamer.min_fifo_words is not None:
             m = self.report.min_fifo_words
             self.report.min_fifo_words = streamer.min_fifo_words if m is None else min(m, streamer.min_fifo_words)
+
+    def _watch_line(self, pd: PassData, streamer: PassStreamer) -> P.Status:
+        link, prof = self.dev.link, self.profile
+        deadline = time.monotonic() + 60 + pd.fires / 1000
+        while True:
+            st = link.status()
+            if st.fault != P.Fault.NONE:
+                raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
+            if streamer.error is not None:      # the device's own report (above) comes first
+                raise StreamError(f"pass {pd.index}: {streamer.error}")
+            if streamer.done and st.flags & P.FLAG_LINE_DONE and st.motion == P.Motion.IDLE:
+                return st
+            if time.monotonic() > deadline:
+                raise JobError(f"pass {pd.index}: the line did not finish")
+            time.sleep(self.poll_interval or 0.001)
 
     # -- the whole job -------------------------------------------------------------------------
     def run(self) -> JobReport:

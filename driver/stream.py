@@ -3,6 +3,7 @@ credit (docs/protocol.md section 3.2)."""
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -36,6 +37,9 @@ class PassStreamer:
         self.min_fifo_words: int | None = None
         self.decoder = P.ReportDecoder()
         self.last_report: P.Report | None = None
+        self.error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
 
     @property
     def done(self) -> bool:
@@ -72,3 +76,21 @@ class PassStreamer:
                 return
             if time.monotonic() > deadline:
                 raise StreamError("the printer did not take the preload data")
+
+    # -- the streaming thread: keeps the ring full while the main thread watches status ----
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name=f"stream-pass-{self.pass_id}",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while not self.done and not self._stop.is_set():
+                self.pump(0.02)
+        except BaseException as exc:  # handed to the job thread
+            self.error = exc
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()

@@ -1,0 +1,42 @@
+"""The driver against `wideprint emulator` in its own process, over a real pseudo-terminal
+(command channel) and TCP (data channel), and over socket:// for the command channel."""
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import random_planes, write_cmyk_tiff
+from wideprint.rip.planes import read_planes
+
+
+def start_emulator(tmp_path, *extra):
+    proc = subprocess.Popen([sys.executable, "-m", "wideprint.app.cli", "emulator",
+                             "--media-out", str(tmp_path / "media-{job}.tif"), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()
+    assert line.startswith("device: "), proc.stderr.read()
+    return proc, line.split(" ", 1)[1].strip()
+
+
+@pytest.mark.parametrize("serial", ["pty", "socket"])
+def test_print_through_standalone_emulator(tmp_path, serial):
+    extra = [] if serial == "pty" else ["--serial-port", "0"]
+    proc, spec = start_emulator(tmp_path, *extra)
+    try:
+        if serial == "pty":
+            assert spec.startswith("serial=/dev/pts/")
+        else:
+            assert spec.startswith("serial=socket://127.0.0.1:")
+        planes = random_planes(400, 260, seed=11)
+        src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+        r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", str(src),
+                            "--device", spec, "--passes", "2", "--bidir"],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert np.array_equal(read_planes(tmp_path / "media-1.tif"), planes)
