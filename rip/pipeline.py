@@ -64,6 +64,16 @@ class RipJob:
         self.width, self.height = self.source.width, self.source.height
 
     @property
+    def ink_limit(self) -> float | None:
+        """--ink-limit if given; else the profile's limit for separations we make (RGB,
+        grey); CMYK files print as they are."""
+        if self.settings.ink_limit is not None:
+            return self.settings.ink_limit
+        if self.source.colorspace == "cmyk":
+            return None
+        return self.profile.raw.get("color", {}).get("ink_limit_percent")
+
+    @property
     def dpi_y(self) -> float:
         return 25.4e3 / self.profile.row_um
 
@@ -72,7 +82,7 @@ class RipJob:
         s = self.settings
         sep = Separator(self.source.colorspace, self.source.depth,
                         embedded_icc=self.source.icc, input_icc=s.input_icc,
-                        output_icc=s.output_icc, intent=s.intent, ink_limit=s.ink_limit,
+                        output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
                         curves=profile_curves(self.profile))
         ht = Halftoner(s.dither, self.width, channels=4)
         for band in self.source.bands(s.band_rows):
