@@ -1,0 +1,132 @@
+"""The pass planner: every halftone dot is fired exactly once, by a live nozzle, at the
+place the geometry says (property-based over images, modes and profiles)."""
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from wideprint.driver import protocol as P
+from wideprint.rip.profile import DEFAULT_PROFILE, ProfileError, load_profile
+from wideprint.rip.swath import PASS_COUNTS, PassPlanner
+
+
+def variant_profile(tmp_dir: Path, dead=(), offsets=None, bidir=None, name="p"):
+    text = DEFAULT_PROFILE.read_text()
+    raw = tomllib.loads(text)
+    lines = text.splitlines()
+    out = []
+    for line in lines:
+        if line.startswith("dead_nozzles"):
+            items = ", ".join(f'{{ head = "{h}", nozzle = {n} }}' for h, n in dead)
+            line = f"dead_nozzles = [{items}]"
+        if line.startswith("bidir_offset_columns") and bidir is not None:
+            line = "bidir_offset_columns = { " + ", ".join(f'{k} = {v}' for k, v in bidir.items()) + " }"
+        out.append(line)
+    text = "\n".join(out) + "\n"
+    if offsets is not None:
+        new_heads = ",\n".join(
+            f'  {{ name = "{h["name"]}", color = "{h["color"]}", x_counts = {off}, y_rows = {h["y_rows"]} }}'
+            for h, off in zip(raw["layout"]["heads"], offsets))
+        start = text.index("heads = [")
+        end = text.index("]\n", start)
+        text = text[:start] + "heads = [\n" + new_heads + ",\n" + text[end:]
+    path = tmp_dir / f"{name}.toml"
+    path.write_text(text)
+    return load_profile(path)
+
+
+def replay(profile, planner, passes, height, width):
+    """Map every fired nozzle back to the image dot it lands on."""
+    got = np.zeros((height, width, 4), np.int32)
+    k = planner.k
+    hpc = profile.heads_per_color
+    for pd in passes:
+        for h in profile.heads:
+            bits = P.words_to_nozzles(pd.words[h.index])          # (fires, 128)
+            assert not bits[:, 0].any() and not bits[:, 127].any()
+            for n in range(profile.nozzles):
+                if (h.index, n) in profile.dead_nozzles:
+                    assert not bits[:, n].any(), f"dead nozzle {h.name}:{n} fired"
+            fi, nz = np.nonzero(bits)
+            if pd.direction == 0:
+                t = pd.first_column + fi
+            else:
+                t = pd.first_column + pd.fires - 1 - fi - profile.bidir_offset_columns.get(planner.dpi, 0)
+            x = t + h.x_counts // k
+            r = pd.top_row + h.y_rows + hpc * nz
+            assert (x >= 0).all() and (x < width).all() and (r >= 0).all() and (r < height).all()
+            np.add.at(got, (r, x, h.channel), 1)
+    return got
+
+
+@st.composite
+def jobs(draw):
+    h = draw(st.integers(1, 700))
+    w = draw(st.integers(1, 90))
+    density = draw(st.sampled_from([0.0, 0.05, 0.5, 1.0]))
+    seed = draw(st.integers(0, 2**31))
+    passes = draw(st.sampled_from(PASS_COUNTS))
+    dpi = draw(st.sampled_from([150, 300, 600]))
+    bidir = draw(st.booleans())
+    band = draw(st.integers(1, 300))
+    ndead = draw(st.integers(0, 4)) if passes > 1 else 0
+    dead = draw(st.lists(st.tuples(st.sampled_from(["C1", "C2", "M1", "M2", "Y1", "Y2", "K1", "K2"]),
+                                   st.integers(1, 126)), min_size=ndead, max_size=ndead, unique=True))
+    offsets = draw(st.lists(st.integers(0, 400).map(lambda v: v * 4), min_size=8, max_size=8))
+    bidir_off = draw(st.integers(-3, 3))
+    return h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(job=jobs())
+def test_every_dot_fired_once_by_a_live_nozzle(tmp_path_factory, job):
+    h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off = job
+    tmp = tmp_path_factory.mktemp("prof")
+    try:
+        profile = variant_profile(tmp, dead, offsets, bidir={150: bidir_off, 300: bidir_off, 600: bidir_off})
+        planner = PassPlanner(profile, w, h, dpi, passes, bidir)
+    except ProfileError as exc:
+        # only acceptable refusal: dead nozzles that leave a row with no live nozzle
+        assert "unprintable" in str(exc)
+        return
+    rng = np.random.default_rng(seed)
+    planes = (rng.random((h, w, 4)) < density).astype(np.uint8)
+    out = []
+    for y in range(0, h, band):
+        out += planner.feed(planes[y:y + band])
+    out += planner.finish()
+    assert [p.index for p in out] == sorted({p.index for p in out})
+    got = replay(profile, planner, out, h, w)
+    assert np.array_equal(got, planes)
+    if bidir:
+        assert [p.direction for p in out] == [i % 2 for i in range(len(out))]
+    else:
+        assert all(p.direction == 0 for p in out)
+
+
+def test_dead_nozzle_with_one_pass_is_refused_with_a_clear_message(tmp_path):
+    profile = variant_profile(tmp_path, dead=[("M1", 57)])
+    with pytest.raises(ProfileError, match="M1:57.*colour M.*1 pass"):
+        PassPlanner(profile, 10, 10, 300, 1)
+
+
+def test_pass_geometry_numbers(profile):
+    pl = PassPlanner(profile, 100, 1000, 300, 4)
+    assert pl.advance == 63 and pl.s0 == 2
+    assert pl.total_passes == -(-1000 // 63) + 3
+    assert pl.y0_rows == 3 * 63 + 2
+
+
+def test_memory_window_is_bounded(profile):
+    """Feeding a tall image band by band keeps only the pass window."""
+    pl = PassPlanner(profile, 64, 20000, 300, 2)
+    rng = np.random.default_rng(0)
+    biggest = 0
+    for y in range(0, 20000, 256):
+        pl.feed((rng.random((256, 64, 4)) < 0.2).astype(np.uint8))
+        biggest = max(biggest, pl._buf.shape[0])
+    assert biggest <= 2 * pl.advance + 256
