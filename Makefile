@@ -21,10 +21,11 @@ install: $(STAMP)
 demo: $(STAMP)
 	mkdir -p $(OUT)
 	$(BIN)/wideprint print $(SAMPLE) --device emulator --media-out $(OUT)/media.tif \
-	    --report $(OUT)/report.json --event-log $(OUT)/events.jsonl
+	    --report $(OUT)/report.json --event-log $(OUT)/events.jsonl \
+	    --preview $(OUT)/media.png
 	$(BIN)/wideprint rip $(SAMPLE) -o $(OUT)/planes.tif
 	$(BIN)/python -m wideprint.app.compare $(OUT)/media.tif $(OUT)/planes.tif
-	@echo "demo: media $(OUT)/media.tif, report $(OUT)/report.json, events $(OUT)/events.jsonl"
+	@echo "demo: media $(OUT)/media.tif (picture $(OUT)/media.png), report $(OUT)/report.json, events $(OUT)/events.jsonl"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider

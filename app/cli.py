@@ -118,6 +118,9 @@ def cmd_print(args) -> int:
             try:
                 rep = job.run().as_dict()
                 rep["media"] = media[i + 1]
+                if args.preview and rep["media"]:
+                    from ..rip.planes import write_preview
+                    write_preview(rep["media"], _media_path(args.preview, i, len(files)))
                 if dev.emulator is not None:
                     stats = dev.emulator.jobs_done.get(i + 1, {})
                     rep["stray_drops"] = stats.get("stray")
@@ -140,6 +143,48 @@ def cmd_print(args) -> int:
     if args.json:
         print(json.dumps(reports, indent=2))
     return EXIT_JOB_FAILED if failed else EXIT_OK
+
+
+def cmd_test_print(args) -> int:
+    from ..device_sim.faults import Faults
+    from ..driver.device import open_device
+    from ..driver.job import JobError, PrintJob
+    from ..driver.link import LinkError
+    from ..rip.pipeline import RipSettings
+    from ..rip.testprints import PatternJob, make_pattern
+    try:
+        profile = _profile(args)
+        faults = Faults.parse(args.inject)
+        k = profile.k(args.dpi)
+        width = int(round(args.width_mm / 25.4 * profile.counts_per_inch / k))
+        planes = make_pattern(args.pattern, profile, width, head=args.head, nozzle=args.nozzle)
+        job = PatternJob(args.pattern, planes, RipSettings(dpi=args.dpi, passes=1), profile)
+    except ValueError as exc:
+        print(f"wideprint test-print: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.planes_out:
+        job.write_planes(args.planes_out)
+    try:
+        dev = open_device(args.device, profile, faults, media_path=args.media_out,
+                          event_log=args.event_log)
+    except (LinkError, ValueError, OSError) as exc:
+        print(f"wideprint test-print: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    try:
+        rep = PrintJob(dev, job, speed_mm_s=args.speed).run()
+        if args.preview and args.media_out:
+            from ..rip.planes import write_preview
+            write_preview(args.media_out, args.preview)
+        print(f"{args.pattern}: printed {rep.passes_printed} passes, {job.width} x {job.height} dots"
+              + (f" -> {args.media_out}" if args.media_out else ""))
+        return EXIT_OK
+    except JobError as exc:
+        print(f"{args.pattern}: FAILED: {exc}", file=sys.stderr)
+        return EXIT_JOB_FAILED
+    finally:
+        if dev.emulator is not None:
+            dev.emulator.close()
+        dev.close()
 
 
 def cmd_emulator(args) -> int:
@@ -184,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--media-out", metavar="MEDIA.tif",
                    help="emulator only: write the printed media (with several files: -N suffix or {job})")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
+    p.add_argument("--preview", metavar="PNG", help="emulator only: a PNG picture of the media")
     p.add_argument("--report", metavar="JSON", help="write the job reports")
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
@@ -195,6 +241,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
+
+    from ..rip.testprints import PATTERNS
+    p = sub.add_parser("test-print", help="print a test pattern (line, sawtooth, nozzle-check)")
+    p.add_argument("pattern", choices=PATTERNS)
+    p.add_argument("--device", default="emulator")
+    p.add_argument("--media-out", metavar="MEDIA.tif")
+    p.add_argument("--planes-out", metavar="PLANES.tif", help="write the pattern's planes")
+    p.add_argument("--preview", metavar="PNG", help="a PNG picture of the media")
+    p.add_argument("--head", default="K1", help="head for line and sawtooth (default K1)")
+    p.add_argument("--nozzle", type=int, default=64, help="nozzle for line (1..126)")
+    p.add_argument("--width-mm", type=float, default=100.0, help="pattern length along the sweep")
+    p.add_argument("--dpi", type=int, choices=(150, 300, 600), default=150)
+    p.add_argument("--speed", type=float, metavar="MM_S", help="carriage speed (default: profile)")
+    p.add_argument("--inject", action="append", metavar="KIND=VALUE")
+    p.add_argument("--event-log", metavar="JSONL")
+    p.add_argument("--profile", metavar="TOML")
+    p.set_defaults(func=cmd_test_print)
 
     p = sub.add_parser("emulator", help="run the printer emulator on a pty and TCP")
     p.add_argument("--data-port", type=int, default=0, help="TCP port of the data channel (0 = any)")

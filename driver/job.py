@@ -69,8 +69,11 @@ def fault_message(st: P.Status, profile) -> str:
 
 
 class PrintJob:
-    def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None):
+    def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None,
+                 speed_mm_s: float | None = None, allow_overspeed: bool = False):
         self.dev = device
+        self.speed_mm_s = speed_mm_s
+        self.allow_overspeed = allow_overspeed
         self.rip = rip
         self.job_id = job_id
         self.profile = device.profile
@@ -148,12 +151,25 @@ class PrintJob:
             raise JobError(f"paper is at step {st.paper_steps}, expected {target_steps}: "
                            f"feed error", P.Fault.PAPER_OUT)
 
+    def line_speed(self) -> int:
+        """Carriage speed in counts/s: the profile's for the dpi mode, or the job's own
+        (--speed), which must not fire the heads faster than they can."""
+        prof, dpi = self.profile, self.rip.settings.dpi
+        if self.speed_mm_s is None:
+            return prof.speed_counts_s(dpi)
+        limit = prof.max_fire_hz * 25.4 / dpi
+        if self.speed_mm_s > limit and not self.allow_overspeed:
+            raise JobError(f"{self.speed_mm_s:.0f} mm/s at {dpi} dpi fires the heads at "
+                           f"{self.speed_mm_s / 25.4 * dpi:.0f} Hz, above their "
+                           f"{prof.max_fire_hz:.0f} Hz (limit {limit:.0f} mm/s)")
+        return int(self.speed_mm_s / 25.4 * prof.counts_per_inch)
+
     def print_pass(self, pd: PassData, x0: int) -> None:
         link, prof = self.dev.link, self.profile
         dpi = self.rip.settings.dpi
         k = prof.k(dpi)
         first = x0 // k + pd.first_column
-        speed, accel = prof.speed_counts_s(dpi), prof.accel_counts_s2()
+        speed, accel = self.line_speed(), prof.accel_counts_s2()
         link.command(P.Op.SET_LINE, struct.pack(P.SET_LINE_FMT, pd.index, pd.direction, dpi,
                                                 first, pd.fires, speed, accel))
         link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
@@ -201,6 +217,7 @@ class PrintJob:
         rep.state = "printing"
         rep.width_dots, rep.height_rows = rip.width, rip.height
         try:
+            self.line_speed()
             self.prepare()
             x0 = self.place()
             planner = rip.planner()

@@ -92,3 +92,27 @@ def read_planes(path: str | Path) -> np.ndarray:
     if data.ndim != 3 or data.shape[2] != 4:
         raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {data.shape})")
     return data
+
+
+# Ink colours on white paper (sRGB), for previews of planes and media.
+INK_RGB = np.array([[0, 174, 239], [236, 0, 140], [255, 242, 0], [35, 31, 32]], np.float32) / 255
+
+
+def render_rgb(planes: np.ndarray) -> np.ndarray:
+    """(h, w, 4) drops -> (h, w, 3) uint8 sRGB: each ink multiplies the paper white by its
+    colour (a subtractive approximation good enough to see dots, bands and gaps)."""
+    out = np.ones(planes.shape[:2] + (3,), np.float32)
+    for c in range(4):
+        on = planes[:, :, c] > 0
+        out[on] *= INK_RGB[c]
+    return (out * 255 + 0.5).astype(np.uint8)
+
+
+def write_preview(planes_path: str | Path, png_path: str | Path, max_side: int = 4000) -> None:
+    """A PNG preview of a planes/media TIFF (reduced by whole-dot sampling if large)."""
+    import cv2
+    planes = read_planes(planes_path)
+    step = max(1, -(-max(planes.shape[:2]) // max_side))
+    rgb = render_rgb(planes[::step, ::step])
+    if not cv2.imwrite(str(png_path), rgb[:, :, ::-1]):
+        raise OSError(f"{png_path}: cannot write the preview")

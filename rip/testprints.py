@@ -1,0 +1,108 @@
+"""Test prints (docs/testprints.md): dot patterns made directly on the device grid and
+printed through the same planner and driver as any image.
+
+- line:         one nozzle of one head draws a line along the sweep; after a feed, a second
+                line (seed 000, 4.2.4 test 1)
+- sawtooth:     a 118-bit shift register, initial value 00...10, shifted once per encoder
+                trigger, drives nozzles 0..117 of one head (one nozzle per fire); nozzles
+                118..126 are held on as a solid reference bar (seed 000, test 2; nozzle 127
+                stays 0 as the XJ128 requires)
+- nozzle-check: every nozzle of every head prints a short dash, staggered in eight columns,
+                so a missing dash names a dead nozzle
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from .pipeline import RipSettings
+from .planes import PlanesWriter
+from .profile import Profile, load_profile
+from .swath import PassData, PassPlanner
+
+PATTERNS = ("line", "sawtooth", "nozzle-check")
+
+
+def _slot_row(profile: Profile, head_name: str, nozzle: int, planner_s0: int) -> tuple[int, int]:
+    """(image row, channel) that one-pass printing puts on this head's nozzle."""
+    for h in profile.heads:
+        if h.name == head_name:
+            return h.y_rows + profile.heads_per_color * nozzle - planner_s0, h.channel
+    raise ValueError(f"no head named {head_name!r}; heads: {', '.join(h.name for h in profile.heads)}")
+
+
+def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
+                 nozzle: int = 64) -> np.ndarray:
+    """The pattern as planes (rows, width, 4) uint8 0/1 on the device grid, for 1 pass."""
+    s0, s1 = profile.usable_slots()
+    rows = s1 - s0
+    if kind == "line":
+        if not 1 <= nozzle <= profile.nozzles - 2:
+            raise ValueError(f"nozzle must be 1..{profile.nozzles - 2} (0 and 127 never fire)")
+        planes = np.zeros((2 * rows, width, 4), np.uint8)
+        r, c = _slot_row(profile, head, nozzle, s0)
+        planes[r, :, c] = 1              # first sweep
+        planes[r + rows, :, c] = 1       # after one swath of feed
+        return planes
+    if kind == "sawtooth":
+        planes = np.zeros((rows, width, 4), np.uint8)
+        x = np.arange(width)
+        # shift register of 118 bits, '1' starting at bit 1 ("00...10"), one shift per trigger
+        n = (1 + x) % 118
+        live = (n >= 1) & (n <= 126)                 # nozzle 0 never fires
+        r, c = _slot_row(profile, head, 0, s0)
+        planes[r + profile.heads_per_color * n[live], x[live], c] = 1
+        for z in range(118, profile.nozzles - 1):    # solid bar, nozzle 127 held at 0
+            planes[r + profile.heads_per_color * z, :, c] = 1
+        return planes
+    if kind == "nozzle-check":
+        dash = max(4, width // 8)
+        planes = np.zeros((rows, 8 * dash, 4), np.uint8)
+        for h in profile.heads:
+            for z in range(1, profile.nozzles - 1):
+                r = h.y_rows + profile.heads_per_color * z - s0
+                x0 = (z % 8) * dash
+                planes[r, x0:x0 + dash - 1, h.channel] = 1
+        return planes
+    raise ValueError(f"test print must be one of {', '.join(PATTERNS)}")
+
+
+@dataclass
+class PatternJob:
+    """A test print with the RipJob interface the driver uses (width, height, settings,
+    planner(), passes(), write_planes())."""
+    kind: str
+    planes: np.ndarray
+    settings: RipSettings = field(default_factory=lambda: RipSettings(passes=1))
+    profile: Profile = field(default_factory=load_profile)
+
+    def __post_init__(self):
+        self.path = f"test-print:{self.kind}"
+        self.height, self.width = self.planes.shape[:2]
+
+    @property
+    def dpi_y(self) -> float:
+        return 25.4e3 / self.profile.row_um
+
+    def planner(self) -> PassPlanner:
+        s = self.settings
+        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir)
+
+    def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
+        planner = planner or self.planner()
+        for y in range(0, self.height, self.settings.band_rows):
+            yield from planner.feed(self.planes[y:y + self.settings.band_rows])
+        yield from planner.finish()
+
+    def write_planes(self, out: str | Path) -> np.ndarray:
+        with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
+                          description=self.path) as w:
+            w.write(self.planes)
+        return self.planes.reshape(-1, 4).sum(axis=0, dtype=np.int64)
+
+    def close(self) -> None:
+        pass
