@@ -91,9 +91,11 @@ class LineRun:
             if first < self.n and load_t > self.t_fire[first] and first < self.stop_index:
                 self._end(first, P.Fault.FIFO_UNDERRUN, 0)
                 return True
-            consumed = int(np.searchsorted(self.t_fire, load_t, side="right"))
-            level = first - min(consumed, first)
+            consumed = min(int(np.searchsorted(self.t_fire, load_t, side="right")), first)
+            level = first - consumed
             self.min_level = level if self.min_level is None else min(self.min_level, level)
+            fpga.fired = consumed            # the line has run up to this block's DMA
+            pr.time = max(pr.time, load_t)
             fpga.move_next()
             pr.on_block_moved(load_t)
             self._drain_fifo()

@@ -187,7 +187,7 @@ class PrintJob:
         finally:
             streamer.stop()
         if streamer.error is not None:
-            raise StreamError(f"pass {pd.index}: {streamer.error}")
+            raise StreamError(str(streamer.error))
         if st.fires_done != pd.fires:
             raise JobError(f"pass {pd.index}: {st.fires_done} of {pd.fires} columns fired")
         link.write_reg(P.REG_WE_EN, 0)
@@ -203,7 +203,7 @@ class PrintJob:
             if st.fault != P.Fault.NONE:
                 raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
             if streamer.error is not None:      # the device's own report (above) comes first
-                raise StreamError(f"pass {pd.index}: {streamer.error}")
+                raise StreamError(str(streamer.error))
             if streamer.done and st.flags & P.FLAG_LINE_DONE and st.motion == P.Motion.IDLE:
                 return st
             if time.monotonic() > deadline:

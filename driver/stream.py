@@ -61,7 +61,7 @@ class PassStreamer:
             try:
                 self.data.send(self.blocks[self.sent][1])
             except (ConnectionError, OSError) as exc:
-                raise StreamError(f"data link: {exc}") from exc
+                raise StreamError(f"pass {self.pass_id}: data link lost ({exc})") from exc
             self.sent += 1
             self._reports(0.0)
         if self.sent < len(self.blocks) and timeout:

@@ -1,0 +1,193 @@
+"""The emulator reproduces the seed thesis' own tests (000, 4.2.4) and reports every
+injected fault the way the device would."""
+
+import struct
+
+import numpy as np
+import pytest
+
+from conftest import random_planes, write_cmyk_tiff
+from wideprint.device_sim.endpoints import in_process
+from wideprint.device_sim.faults import Faults
+from wideprint.device_sim.printer import Printer
+from wideprint.driver import protocol as P
+from wideprint.driver.device import Device, open_device
+from wideprint.driver.job import JobError, PrintJob
+from wideprint.driver.link import CommandLink, DeviceError
+from wideprint.rip.pipeline import RipJob, RipSettings
+from wideprint.rip.planes import read_planes
+from wideprint.rip.testprints import PatternJob, make_pattern
+
+
+def run(job, profile, media, faults=None, **kw):
+    dev = open_device("emulator", profile, faults, media_path=str(media))
+    try:
+        return PrintJob(dev, job, **kw).run(), dev.emulator
+    finally:
+        dev.emulator.close()
+
+
+def pattern(kind, profile, width_cols=600, dpi=150, **kw):
+    planes = make_pattern(kind, profile, width_cols, **kw)
+    return PatternJob(kind, planes, RipSettings(dpi=dpi, passes=1), profile), planes
+
+
+def connected(printer=None):
+    printer = printer or Printer()
+    ser, data = in_process(printer)
+    link = CommandLink(ser)
+    link.handshake()
+    return printer, link
+
+
+# -- seed test 3: the DSP-FPGA interface ------------------------------------------------------
+def test_dir_dpi_we_en_read_back_through_status():
+    printer, link = connected()
+    from wideprint.rip.profile import load_profile
+    Device(link, None, load_profile()).load_head_config()
+    link.command(P.Op.ENABLE, b"\x01")
+    for dir_, dpi, we in [(1, 150, 0), (0, 600, 1), (1, 300, 1), (0, 150, 0)]:
+        link.write_reg(P.REG_DIR, dir_)
+        link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
+        link.write_reg(P.REG_WE_EN, we)
+        st = link.read_reg(P.REG_STATUS)
+        assert st & P.STATUS_DIR == dir_
+        assert bool(st & P.STATUS_DPI600) == (dpi == 600)
+        assert bool(st & P.STATUS_DPI300) == (dpi == 300)
+        assert bool(st & P.STATUS_WE_EN) == bool(we)
+        assert st & P.STATUS_CONFIGURED
+    with pytest.raises(DeviceError, match="BAD_ARGUMENT"):
+        link.write_reg(P.REG_DPI, 7)
+
+
+def test_print_enable_refused_before_head_configuration():
+    printer, link = connected()
+    link.command(P.Op.ENABLE, b"\x01")
+    with pytest.raises(DeviceError, match="HEADS_NOT_CONFIGURED"):
+        link.write_reg(P.REG_WE_EN, 1)
+    assert printer.fault == P.Fault.HEAD_CONFIG
+
+
+# -- the configuration trace (000, fig. 4-11) --------------------------------------------------
+def test_head_configuration_trace(profile):
+    printer, link = connected()
+    Device(link, None, profile).load_head_config()
+    trace = printer.config_traces[-1]
+    assert trace.digits[:5] == [1, 2, 0, 1, 2]
+    assert len(trace.digits) == 1020
+    period = np.diff(trace.dstb_rise_ns)
+    assert (period == 2000).all()                       # DSTB at 500 kHz
+    assert trace.data_nconfig_rise_ns > trace.dstb_rise_ns[-1]   # after the 1,020th digit
+    assert trace.data_nconfig_rise_ns - trace.dstb_rise_ns[-1] <= 2000
+    assert all(h.configured for h in printer.heads)
+
+
+def test_configuration_with_a_bad_crc_is_refused(profile):
+    printer, link = connected()
+    digits = profile.head_config_digits()
+    packed = bytes(digits[i] | digits[i + 1] << 4 for i in range(0, 400, 2))
+    link.command(P.Op.HEAD_CONFIG_DATA, struct.pack("<H", 0) + packed)
+    with pytest.raises(DeviceError, match="CONFIG_CRC"):
+        link.command(P.Op.HEAD_CONFIG_LOAD, struct.pack("<HI", 1020, 12345))
+    assert not any(h.configured for h in printer.heads)
+
+
+# -- seed test 1: one nozzle draws a line; a feed; a second line ---------------------------------
+def test_one_nozzle_line(tmp_path, profile):
+    job, planes = pattern("line", profile, head="C1", nozzle=37)
+    rep, emu = run(job, profile, tmp_path / "m.tif")
+    media = read_planes(tmp_path / "m.tif")
+    assert np.array_equal(media, planes)
+    rows = np.flatnonzero(media[:, :, 0].any(axis=1))
+    assert len(rows) == 2                                 # two lines
+    for r in rows:
+        assert (media[r, :, 0] == 1).all()                 # no breaks, no doubled dots
+    assert media[:, :, 1:].sum() == 0
+    assert rep.passes_printed == 2
+
+
+# -- seed test 2: the sawtooth ----------------------------------------------------------------
+def test_sawtooth_slope_is_the_same_at_two_speeds(tmp_path, profile):
+    job, planes = pattern("sawtooth", profile, width_cols=500)
+    run(job, profile, tmp_path / "slow.tif", speed_mm_s=100)
+    job2, _ = pattern("sawtooth", profile, width_cols=500)
+    run(job2, profile, tmp_path / "fast.tif", speed_mm_s=660)
+    slow, fast = read_planes(tmp_path / "slow.tif"), read_planes(tmp_path / "fast.tif")
+    assert np.array_equal(slow, planes) and np.array_equal(fast, planes)
+    k = slow[:, :, 3]
+    # one nozzle per fire on the ramp: each column has exactly one dot above the bar
+    bar_top = profile.heads_per_color * 118 - 2
+    assert (k[:bar_top].sum(axis=0) <= 1).all()
+    # the ramp climbs one nozzle (2 rows) per column and repeats every 118 columns
+    col = np.argmax(k[:bar_top] > 0, axis=0)
+    assert col[10] - col[9] == 2 and col[128] == col[10]
+
+
+def test_printing_stops_when_the_carriage_stops(tmp_path, profile):
+    job, planes = pattern("sawtooth", profile, width_cols=500)
+    limit = 5_000           # counts: a limit switch trips while K1 is drawing the ramp
+    with pytest.raises(JobError, match="right limit switch.*pass 0, column"):
+        run(job, profile, tmp_path / "m.tif", Faults(limit_at=limit))
+    media = read_planes(tmp_path / "m.tif")
+    head = next(h for h in profile.heads if h.name == "K1")
+    # drops exist exactly where K1's trigger position was below the switch
+    printed = media[:, :, 3].any(axis=0)
+    assert printed.any() and not printed.all()
+    last = np.flatnonzero(printed)[-1]
+    assert np.array_equal(media[:, :last + 1], planes[:, :last + 1])
+    assert media[:, last + 1:].sum() == 0
+
+
+# -- faults -------------------------------------------------------------------------------------
+def test_dead_nozzle_misses_exactly_its_dots(tmp_path, profile):
+    job, planes = pattern("nozzle-check", profile, width_cols=160)
+    run(job, profile, tmp_path / "m.tif", Faults(dead_nozzle=[("M1", 57)]))
+    media = read_planes(tmp_path / "m.tif")
+    m1 = next(h for h in profile.heads if h.name == "M1")
+    row = m1.y_rows + 2 * 57 - 2
+    expected = planes.copy()
+    expected[row, :, 1] = 0
+    assert planes[row, :, 1].any()
+    assert np.array_equal(media, expected)
+
+
+@pytest.mark.parametrize("faults,pattern_text", [
+    (Faults(overtemp=[("K2", 0)]), r"over-temperature \(head K2, pass 0, column"),
+    (Faults(paper_length_mm=5), r"paper out"),
+    (Faults(encoder_glitch_at=9_000), r"encoder glitch.*pass 0, column"),
+    (Faults(data_drop_after=3), r"pass 0: data link lost"),
+    (Faults(fifo_words=128, host_jitter="loaded", seed=3), r"FIFO underrun.*pass \d+, column"),
+])
+def test_device_faults_stop_the_job_with_a_clear_message(tmp_path, profile, faults, pattern_text):
+    planes = random_planes(600, 2000, seed=5)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    with pytest.raises(JobError, match=pattern_text):
+        run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif", faults)
+
+
+def test_overspeed_is_refused_by_the_driver_and_caught_by_the_device(tmp_path, profile):
+    job, _ = pattern("sawtooth", profile, width_cols=300, dpi=600)
+    with pytest.raises(JobError, match="above their 8300 Hz"):
+        run(job, profile, tmp_path / "a.tif", speed_mm_s=500)
+    job, _ = pattern("sawtooth", profile, width_cols=300, dpi=600)
+    with pytest.raises(JobError, match="fire rate above the head's maximum"):
+        run(job, profile, tmp_path / "b.tif", speed_mm_s=500, allow_overspeed=True)
+
+
+def test_serial_noise_is_retried_and_the_print_is_still_exact(tmp_path, profile):
+    planes = random_planes(500, 300, seed=8)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    rep, emu = run(RipJob(str(src), RipSettings(passes=2, bidir=True), profile), profile,
+                   tmp_path / "m.tif", Faults(serial_byte_error=1e-3, seed=4))
+    assert rep.retries > 0
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+
+
+def test_fifo_levels_and_min_level_are_reported(tmp_path, profile):
+    planes = random_planes(300, 400, seed=2)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    rep, emu = run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif",
+                   Faults(host_jitter="typical"))
+    lines = [e for e in emu.events if e["event"] == "line"]
+    assert lines and all(0 <= e["min_fifo_words"] <= profile.fifo_words for e in lines)
+    assert all(e["fault"] == "NONE" and e["fired"] == e["fires"] for e in lines)
