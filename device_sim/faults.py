@@ -20,6 +20,7 @@ KINDS = {
     "overtemp": "HEAD:PASS: the head overheats during this pass, e.g. K2:3",
     "fifo-words": "FIFO depth per head (words) instead of the profile's",
     "encoder-glitch-at": "an impossible A/B transition at this encoder count",
+    "starve-guard": "0: a starved FIFO is the seed's underrun fault; 1: pause and resume the line",
     "seed": "random seed for the injected faults",
 }
 
@@ -39,6 +40,7 @@ class Faults:
     overtemp: list = field(default_factory=list)         # [(head name, pass)]
     fifo_words: int | None = None
     encoder_glitch_at: int | None = None
+    starve_guard: int | None = None
     seed: int = 1
 
     @classmethod
@@ -61,7 +63,7 @@ class Faults:
                         raise ValueError(value)
                     f.host_jitter = value
                 elif attr in ("data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
-                              "seed"):
+                              "seed", "starve_guard"):
                     setattr(f, attr, int(float(value)))
                 else:
                     setattr(f, attr, float(value))

@@ -127,6 +127,13 @@ class Fpga:
         self.blocks_moved = 0
         self.min_level_fires: int | None = None
 
+    def flush_unfired(self) -> None:
+        """FLUSH block (docs/protocol.md 3.1): drop what is queued but not fired; the next
+        block must start at the first fire not made."""
+        self.ring.clear()
+        self.fifo.clear()
+        self.queued_fires = self.loaded_fires = self.fired
+
     def fifo_level_fires(self) -> int:
         return self.loaded_fires - self.fired
 
@@ -140,7 +147,7 @@ class Fpga:
         """A block from the data channel enters the DMA ring (or is refused with a fault)."""
         if block.kind == P.BLOCK_FLUSH:
             if block.pass_id == self.pass_id:
-                self.flush()
+                self.flush_unfired()
             return P.Fault.NONE
         if block.pass_id != self.pass_id or block.first_fire != self.queued_fires:
             return P.Fault.DATA_SEQUENCE

@@ -3,8 +3,13 @@ FPGA feeds each fire from the head FIFOs, and drops land on the media.
 
 Event-driven and vectorised: the fire times come from the motion profile in closed form;
 the DMA ring and FIFOs are stepped once per data block (not per fire): block b may enter
-the FIFOs when its host buffer was ready and the FIFOs had room, and an underrun is the
-first fire whose block was not in the FIFO in time (docs/emulator.md).
+the FIFOs when its host buffer was ready and the FIFOs had room.  A block that is late for
+its first fire is a starvation (docs/protocol.md 2.7):
+- with the starve guard (profile `fpga.starve_guard`, default on) the FPGA stops firing
+  at that column, the DSP brakes, and when the FIFOs are full again (or hold the rest of
+  the line) it backs up and re-runs the line from that column: the pass completes with
+  every dot in place, only later;
+- without it, it is the seed's FIFO underrun: a fault with head, pass and column.
 """
 
 from __future__ import annotations
@@ -12,11 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..driver import protocol as P
-from .motion import Trapezoid
+from .motion import Trapezoid, ramp_counts
 
 
 class LineRun:
-    def __init__(self, printer, move: Trapezoid, t_start: float):
+    def __init__(self, printer, move: Trapezoid, t_start: float, speed: float, accel: float):
         fpga = printer.fpga
         self.printer = printer
         self.pass_id = fpga.pass_id
@@ -24,18 +29,26 @@ class LineRun:
         self.k = printer.profile.counts_per_inch // fpga.dpi
         self.first = fpga.fire_start
         self.n = fpga.fire_count
+        self.speed, self.accel = speed, accel
         i = np.arange(self.n)
         self.columns = self.first + i if self.forward else self.first + self.n - 1 - i
-        self.move = move
-        self.t_start = t_start
-        self.t_fire = t_start + move.time_at(self.columns * self.k)
+        self.end = move.end
+        self.t_fire = np.full(self.n, np.inf)
+        self._segment(0, move, t_start)
         self.stop_index = self.n           # fires at or after it are never made
         self.stop_fault = P.Fault.NONE
         self.stop_head = 0xFF
         self.done = False
+        self.paused_at: int | None = None  # starved: next fire index, carriage braking/stopped
+        self.pauses = 0
         self.fault = P.Fault.NONE
         self.min_level: int | None = None
         self._plan_stops()
+
+    def _segment(self, i0: int, move: Trapezoid, t_start: float) -> None:
+        """Fires i0.. happen on this move."""
+        self.move, self.t_seg = move, t_start
+        self.t_fire[i0:] = t_start + move.time_at(self.columns[i0:] * self.k)
 
     # -- faults known when the line starts ----------------------------------------------------
     def _stop_at(self, index: int, fault: P.Fault, head: int = 0xFF) -> None:
@@ -56,8 +69,7 @@ class LineRun:
                 self._stop_at(int(hit[0]), P.Fault.ENCODER)
         for name, pass_id in inj.overtemp:
             if pass_id == self.pass_id:
-                head = pr.head_index(name)
-                self._stop_at(self.n // 2, P.Fault.HEAD_OVERTEMP, head)
+                self._stop_at(self.n // 2, P.Fault.HEAD_OVERTEMP, pr.head_index(name))
         if self.n > 1:
             period = np.diff(self.t_fire)
             fast = np.flatnonzero(period < 1.0 / pr.profile.max_fire_hz)
@@ -72,25 +84,32 @@ class LineRun:
         cap = fpga.capacity_fires
         self._drain_fifo()          # blocks preloaded before the line started
         while not self.done:
+            if self.paused_at is not None:
+                if not self._try_resume(cap):
+                    return False
+                continue
             if fpga.loaded_fires >= min(self.n, self.stop_index):
                 if self.stop_index < self.n:
                     self._end(self.stop_index, self.stop_fault, self.stop_head)
                 else:
                     self._end(self.n, P.Fault.NONE)
                 return True
+            first = fpga.loaded_fires
             if not fpga.ring:
                 if link_alive:
                     return False
-                self._end(fpga.loaded_fires, P.Fault.DATA_LINK_LOST)
-                return True
+                # nothing more can come for now: the line starves at `first`
+                if not self._starve(first, P.Fault.DATA_LINK_LOST):
+                    return True
+                continue
             rb = fpga.ring[0]
-            first = fpga.loaded_fires
             room_idx = first + rb.block.fires - cap - 1     # this fire must be made first
             room_t = self.t_fire[room_idx] if room_idx >= 0 else -np.inf
             load_t = max(room_t, rb.ready_s + pr.dma_time(rb.block))
             if first < self.n and load_t > self.t_fire[first] and first < self.stop_index:
-                self._end(first, P.Fault.FIFO_UNDERRUN, 0)
-                return True
+                if not self._starve(first, P.Fault.FIFO_UNDERRUN):
+                    return True
+                continue
             consumed = min(int(np.searchsorted(self.t_fire, load_t, side="right")), first)
             level = first - consumed
             self.min_level = level if self.min_level is None else min(self.min_level, level)
@@ -101,9 +120,58 @@ class LineRun:
             self._drain_fifo()
         return True
 
+    def _starve(self, index: int, fault: P.Fault) -> bool:
+        """The FIFOs ran dry before fire `index`.  Returns False if that ended the line."""
+        pr = self.printer
+        if not pr.starve_guard:
+            self._end(index, fault, 0)
+            return False
+        # firing stops at `index`; the carriage brakes from wherever it is
+        t = self.t_fire[index]
+        pos = self.move.position_at(t - self.t_seg)
+        v = abs(self.move.speed_at(t - self.t_seg))
+        sign = 1 if self.forward else -1
+        stop = pos + sign * v * v / (2 * self.accel)
+        self.paused_at = index
+        self.pauses += 1
+        self.printer.fpga.fired = index
+        pr.carriage_park_at(stop, t + v / self.accel)
+        pr.log("starved", pass_id=self.pass_id, fire=int(index), column=int(self.columns[index]),
+               cause=fault.name)
+        return True
+
+    def _try_resume(self, cap: int) -> bool:
+        """Back up and re-run the line from the paused column once the FIFOs are full
+        (or hold the rest of the line)."""
+        pr, fpga = self.printer, self.printer.fpga
+        i = self.paused_at
+        t = pr.time
+        while fpga.ring and fpga.fifo_level_fires() + fpga.ring[0].block.fires <= cap:
+            rb = fpga.ring[0]
+            t = max(t, rb.ready_s + pr.dma_time(rb.block))
+            fpga.move_next()
+            pr.on_block_moved(t)
+        remaining = min(self.n, self.stop_index) - i
+        have = fpga.loaded_fires - i
+        if have < min(remaining, cap - (cap % max(1, pr.profile.block_fires))):
+            return False
+        pr.time = max(pr.time, t)
+        sign = 1 if self.forward else -1
+        ramp = ramp_counts(self.speed, self.accel, self.k)
+        start = float(self.columns[i] * self.k - sign * ramp)
+        pr.move_carriage_to(start)
+        move = Trapezoid(start, self.end, self.speed, self.accel)
+        self._segment(i, move, pr.time)
+        self.paused_at = None
+        pr.log("resumed", pass_id=self.pass_id, fire=int(i), column=int(self.columns[i]))
+        self._drain_fifo()
+        return True
+
     def _drain_fifo(self) -> None:
         """Fire the blocks in the FIFOs.  Drops are placed by position, so a block's fires
         can be placed as soon as it is certain they happen (its data arrived in time)."""
+        if self.paused_at is not None:
+            return
         fifo = self.printer.fpga.fifo
         while fifo:
             block = fifo.popleft()
@@ -131,14 +199,13 @@ class LineRun:
         self.fault = fault
         pr.fpga.fired = fired
         if fault == P.Fault.NONE:
-            t_end = self.t_start + self.move.duration
-            pr.carriage_stop(self.move.end, t_end)
+            pr.carriage_stop(self.move.end, self.t_seg + self.move.duration)
         else:
-            t = self.t_fire[fired] if fired < self.n else self.t_start + self.move.duration
-            pos = self.move.position_at(t - self.t_start)
+            t = self.t_fire[fired] if fired < self.n else self.t_seg + self.move.duration
+            pos = self.move.position_at(t - self.t_seg)
             column = int(self.columns[fired]) if fired < self.n else int(self.columns[-1])
             pr.raise_fault(fault, head=head, pass_id=self.pass_id, column=column, t=t)
             pr.carriage_stop(pos, t)
         pr.log("line", pass_id=self.pass_id, forward=self.forward, first_column=int(self.first),
-               fires=int(self.n), fired=int(fired), fault=fault.name,
+               fires=int(self.n), fired=int(fired), fault=fault.name, pauses=self.pauses,
                min_fifo_words=None if self.min_level is None else self.min_level * P.WORDS_PER_FIRE)

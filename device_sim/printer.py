@@ -72,6 +72,8 @@ class Printer:
         self.line_cfg: dict | None = None
         self.line: LineRun | None = None
         self.link_alive = True
+        self.starve_guard = bool(prof.raw["fpga"].get("starve_guard", True)) \
+            if self.faults.starve_guard is None else bool(self.faults.starve_guard)
         self.block_decoder = P.BlockDecoder()
         self._data_out = bytearray()
         self._pass_blocks_received = 0
@@ -178,6 +180,8 @@ class Printer:
 
     def data_link_up(self) -> None:
         self.link_alive = True
+        self.starve_guard = bool(prof.raw["fpga"].get("starve_guard", True)) \
+            if self.faults.starve_guard is None else bool(self.faults.starve_guard)
 
     def host_latency(self) -> float:
         """Host DMA refill latency (docs/emulator.md): how long after a ring slot frees the
@@ -363,10 +367,18 @@ class Printer:
         self.fpga.firing = True
         self.line_done = False
         self.motion = P.Motion.PRINTING
-        self.line = LineRun(self, move, self.time)
+        self.line = LineRun(self, move, self.time, cfg["speed"], cfg["accel"])
         self.line_cfg = None       # a line runs once
         self.pump()
         return P.Result.OK
+
+    def carriage_park_at(self, counter_position: float, t: float) -> None:
+        """The carriage braked to a stop inside a line (starved); the line stays active."""
+        self.position = counter_position + self.count_offset
+        self.time = max(self.time, t)
+
+    def move_carriage_to(self, counter_position: float) -> None:
+        self._move_to(counter_position + self.count_offset)
 
     def carriage_stop(self, counter_position: float, t: float) -> None:
         self.position = counter_position + self.count_offset

@@ -156,7 +156,8 @@ def test_dead_nozzle_misses_exactly_its_dots(tmp_path, profile):
     (Faults(paper_length_mm=5), r"paper out"),
     (Faults(encoder_glitch_at=9_000), r"encoder glitch.*pass 0, column"),
     (Faults(data_drop_after=3), r"pass 0: data link lost"),
-    (Faults(fifo_words=128, host_jitter="loaded", seed=3), r"FIFO underrun.*pass \d+, column"),
+    (Faults(fifo_words=128, host_jitter="loaded", seed=3, starve_guard=0),
+     r"FIFO underrun.*pass \d+, column"),
 ])
 def test_device_faults_stop_the_job_with_a_clear_message(tmp_path, profile, faults, pattern_text):
     planes = random_planes(600, 2000, seed=5)
@@ -191,3 +192,15 @@ def test_fifo_levels_and_min_level_are_reported(tmp_path, profile):
     lines = [e for e in emu.events if e["event"] == "line"]
     assert lines and all(0 <= e["min_fifo_words"] <= profile.fifo_words for e in lines)
     assert all(e["fault"] == "NONE" and e["fired"] == e["fires"] for e in lines)
+
+
+def test_starved_line_pauses_and_resumes_with_every_dot_in_place(tmp_path, profile):
+    """The same starving host as the underrun fault above, with the starve guard on."""
+    planes = random_planes(600, 2000, seed=5)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    rep, emu = run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif",
+                   Faults(fifo_words=128, host_jitter="loaded", seed=3))
+    pauses = sum(e["pauses"] for e in emu.events if e["event"] == "line")
+    assert pauses > 0
+    assert any(e["event"] == "resumed" for e in emu.events)
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)

@@ -1,0 +1,373 @@
+"""The carriage servo: DSP position loop + L298/LM393 power stage + PITTMAN DC motor + belt.
+
+Seed 000 ch. 3 (docs/motion.md).  The DSP plans a trapezoidal position reference in encoder
+counts (accelerate, cruise, decelerate), samples the QEP counter every `period_s`, and runs
+the incremental (velocity-form) PI of seed eq. 3-10 on the position error (counts -> volts),
+plus velocity and acceleration feed-forward computed from the reference.  The PWM duty is
+modelled as its average voltage (seed eq. 3-6/3-7: the L298 is a pure gain), saturating at
+the supply.  The LM393 cuts the bridge when the sense current reaches 2 A: modelled as an
+ideal current clamp, and the cut is reported.
+
+The plant (seed eq. 3-1/3-2) is integrated with a fixed step of at most `max_dt_s` (20 us;
+the electrical time constant L/R is 0.83 ms): per step the armature current is advanced
+exactly (exponential) at the step's back-EMF, the current clamp is applied, then the
+mechanics take the step's mean torque (semi-implicit).  All of it runs in one numba kernel:
+a 5 s line at a 50 us servo period costs a few milliseconds.
+
+Units inside: position in encoder counts (1/600 inch of belt), speed counts/s, current A,
+voltage V.  `counts_per_rad` = pulley radius / count pitch = 118.1 counts per motor radian.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numba import njit
+
+from .motion import Trapezoid
+
+MM_PER_INCH = 25.4
+
+# seed 000 3.3.2.4: speed-feedback scale K_g (V per rad/s) and PWM amplifier gain K_w (V/V);
+# used only to express the seed's (Kp, Ti) in our units (docs/motion.md "Gains").
+SEED_KG_V_PER_RAD_S = 0.25
+SEED_KW = 2.4
+SEED_PERIOD_S = 0.05
+
+
+@dataclass
+class ServoParams:
+    """Plant, power stage and DSP controller of the carriage axis."""
+    # plant (seed 000 table 3-3, profile [carriage])
+    ke: float = 0.0287                  # back-EMF constant, V s/rad
+    kt: float = 0.0287                  # torque constant, N m/A
+    r_ohm: float = 1.89
+    l_h: float = 0.00156
+    j_kg_m2: float = 1e-4               # at the motor shaft, carriage included
+    friction_nm: float = 0.0            # Coulomb friction at the shaft (not in the profile: 0)
+    supply_v: float = 19.1              # L298 bridge: the average voltage saturates here
+    current_limit_a: float = 2.0        # LM393 cut
+    pulley_diameter_mm: float = 10.0
+    counts_per_inch: int = 600          # 150 lpi x4
+    # DSP
+    period_s: float = 0.00005           # servo sampling period
+    kp: float = 0.0                     # V per count of position error (eq. 3-10 Kp)
+    ti_s: float = 1.32                  # integral time, s (Ki = Kp T / Ti)
+    kd: float = 0.0                     # V per count (eq. 3-10 Kd; 0: the thesis' PI)
+    kff_v: float = 0.0                  # V per count/s of reference speed
+    kff_a: float = 0.0                  # V per count/s^2 of reference acceleration
+    max_dt_s: float = 20e-6             # plant integration step (upper bound)
+
+    # -- derived -------------------------------------------------------------------------
+    @property
+    def counts_per_rad(self) -> float:
+        return (self.pulley_diameter_mm / 2) / (MM_PER_INCH / self.counts_per_inch)
+
+    @property
+    def counts_per_mm(self) -> float:
+        return self.counts_per_inch / MM_PER_INCH
+
+    @property
+    def tau_mech_s(self) -> float:
+        """Electromechanical time constant T_m = J R / (Ke Kt) (0.23 s)."""
+        return self.j_kg_m2 * self.r_ohm / (self.ke * self.kt)
+
+    @property
+    def tau_elec_s(self) -> float:
+        return self.l_h / self.r_ohm
+
+    @property
+    def ki(self) -> float:
+        """Integral gain per sample, V per count: Kp T / Ti (seed 3-9)."""
+        return self.kp * self.period_s / self.ti_s if self.ti_s > 0 else 0.0
+
+    def model_ff(self) -> tuple[float, float]:
+        """Feed-forward gains from the nominal model: V = Ke w + R J alpha / Kt."""
+        c = self.counts_per_rad
+        return self.ke / c, self.r_ohm * self.j_kg_m2 / (self.kt * c)
+
+    def with_period(self, period_s: float) -> "ServoParams":
+        """The same axis with the DSP loop re-tuned for another sampling period."""
+        kp, ti = tuned_gains(self, period_s)
+        kv, ka = self.model_ff()
+        return replace(self, period_s=period_s, kp=kp, ti_s=ti, kff_v=kv, kff_a=ka)
+
+    @classmethod
+    def from_profile(cls, profile, period_s: float | None = None) -> "ServoParams":
+        c = profile.raw["carriage"]
+        base = cls(
+            ke=float(c.get("motor_ke", 0.0287)), kt=float(c.get("motor_kt", c.get("motor_ke", 0.0287))),
+            r_ohm=float(c.get("motor_r_ohm", 1.89)), l_h=float(c.get("motor_l_h", 0.00156)),
+            j_kg_m2=float(c.get("inertia_kg_m2", 1e-4)),
+            friction_nm=float(c.get("friction_nm", 0.0)),
+            supply_v=float(c.get("supply_v", 19.1)),
+            current_limit_a=float(c.get("current_limit_a", 2.0)),
+            pulley_diameter_mm=float(c.get("pulley_diameter_mm", 10.0)),
+            counts_per_inch=int(profile.counts_per_inch),
+            ti_s=float(c.get("ti_s", 1.32)),
+        )
+        T = float(period_s if period_s is not None else c.get("servo_period_s", 0.00005))
+        return base.with_period(T)
+
+    @classmethod
+    def thesis(cls, profile=None) -> "ServoParams":
+        """The thesis set-up: 50 ms sampling (seed 000 3.3.1)."""
+        if profile is not None:
+            return cls.from_profile(profile, period_s=SEED_PERIOD_S)
+        return cls().with_period(SEED_PERIOD_S)
+
+    # -- the seed's gains in our units -------------------------------------------------------
+    def seed_gain_unit(self) -> float:
+        """V per count corresponding to Kp = 1 of the thesis: its PI acts on the speed error
+        through K_g = 0.25 V per rad/s and drives the bridge through K_w = 2.4, so one count of
+        position error accrued over one 50 ms period is K_w K_g / (counts_per_rad T) volts."""
+        return SEED_KW * SEED_KG_V_PER_RAD_S / (self.counts_per_rad * SEED_PERIOD_S)
+
+
+def tuned_gains(p: ServoParams, period_s: float) -> tuple[float, float]:
+    """(Kp in V per count, Ti in s) for a sampling period.
+
+    The loop is P + I on position with the motor's own back-EMF as the only damping, so
+    the proportional gain is bounded twice: by sampling (the discrete loop with a zero-order
+    hold over T) and by damping (tau_m K Kp <= ~0.4, K = counts/s per volt).  We take the
+    smaller of 30 % of the discrete critical gain and the damping bound; Ti stays the seed's
+    1.32 s (docs/motion.md, "Gains")."""
+    K = p.counts_per_rad / p.ke                         # counts/s per volt at steady speed
+    tau = p.tau_mech_s
+    a = math.exp(-period_s / tau)
+    # ZOH discretisation of K/(s (tau s + 1)): b1 z + b0 over (z - 1)(z - a)
+    b1 = K * (period_s - tau * (1 - a))
+    b0 = K * (tau * (1 - a) - a * period_s)
+    # P-only critical gain: the constant term a + Kp b0 reaches 1 (complex pair on |z| = 1)
+    # or the real root crosses -1: 1 + (1 + a) + Kp (b0 - b1) = 0 -> Kp = (2 + 2a) / (b1 - b0)
+    k_complex = (1 - a) / b0 if b0 > 0 else math.inf
+    k_real = (2 + 2 * a) / (b1 - b0) if b1 > b0 else math.inf
+    k_crit = min(k_complex, k_real)
+    k_damp = 0.4 / (tau * K)
+    return min(0.3 * k_crit, k_damp), p.ti_s
+
+
+# -- the kernel ------------------------------------------------------------------------------
+@njit(cache=True)
+def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kd, vmax, ke, kt, r, l, j, tf, ilim, cpr,
+                  out_x, out_v, out_i, out_u):
+    """Run len(ff) controller periods of n_sub plant steps each.  ff[k] is the feed-forward
+    voltage for period k, xref[k] the reference at its start.  Records the state after every
+    plant step (index 0 = initial).  Returns (tripped, samples written)."""
+    x = x0
+    v = 0.0          # counts/s
+    i = 0.0
+    u = 0.0          # PI output (the velocity-form accumulator)
+    e1 = 0.0
+    e2 = 0.0
+    tripped = False
+    out_x[0] = x
+    out_v[0] = 0.0
+    out_i[0] = 0.0
+    out_u[0] = 0.0
+    ea = math.exp(-dt * r / l)
+    mean_f = (l / (r * dt)) * (1.0 - ea)      # mean of the exponential over the step
+    n = 0
+    first = True
+    for k in range(ff.shape[0]):
+        # QEP count: edges at integer positions
+        cnt = math.floor(x + 1e-9)
+        e = xref[k] - cnt
+        if first:
+            e1 = e
+            e2 = e
+            first = False
+        du = kp * (e - e1) + ki * e + kd * (e - 2.0 * e1 + e2)
+        u += du
+        volts = u + ff[k]
+        # anti-windup: the accumulator never asks beyond the bridge
+        if volts > vmax:
+            u -= volts - vmax
+            volts = vmax
+        elif volts < -vmax:
+            u -= volts + vmax
+            volts = -vmax
+        e2 = e1
+        e1 = e
+        for s in range(n_sub):
+            w = v / cpr
+            iss = (volts - ke * w) / r
+            i_new = iss + (i - iss) * ea
+            i_avg = iss + (i - iss) * mean_f
+            # LM393 over-current cut: the bridge turns off until the current falls below the
+            # limit; at PWM rates this chops the current at the limit (ideal clamp)
+            if i_new > ilim:
+                i_new = ilim
+                tripped = True
+            elif i_new < -ilim:
+                i_new = -ilim
+                tripped = True
+            if i_avg > ilim:
+                i_avg = ilim
+            elif i_avg < -ilim:
+                i_avg = -ilim
+            torque = kt * i_avg
+            if w > 0.0:
+                w_new = w + dt * (torque - tf) / j
+                if w_new < 0.0:
+                    w_new = 0.0
+            elif w < 0.0:
+                w_new = w + dt * (torque + tf) / j
+                if w_new > 0.0:
+                    w_new = 0.0
+            else:
+                if torque > tf:
+                    w_new = dt * (torque - tf) / j
+                elif torque < -tf:
+                    w_new = dt * (torque + tf) / j
+                else:
+                    w_new = 0.0
+            v_new = w_new * cpr
+            x += 0.5 * (v + v_new) * dt
+            v = v_new
+            i = i_new
+            n += 1
+            out_x[n] = x
+            out_v[n] = v
+            out_i[n] = i
+            out_u[n] = volts
+    return tripped, n + 1
+
+
+# -- reference ---------------------------------------------------------------------------------
+def trapezoid_reference(move: Trapezoid, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position, speed and acceleration of the ideal trapezoid at times t (vectorised)."""
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, None)
+    s, vp, a, tr, T = move.sign, move.v_peak, move.a, move.t_ramp, move.duration
+    d = np.empty_like(t)
+    v = np.zeros_like(t)
+    acc = np.zeros_like(t)
+    if move.distance == 0:
+        return np.full_like(t, move.start), v, acc
+    up = t <= tr
+    down = t >= T - tr
+    cru = ~up & ~down
+    d[up] = 0.5 * a * t[up] ** 2
+    v[up] = a * t[up]
+    acc[up] = a
+    d[cru] = move.d_ramp + vp * (t[cru] - tr)
+    v[cru] = vp
+    rem = np.clip(T - t[down], 0.0, None)
+    d[down] = move.distance - 0.5 * a * rem ** 2
+    v[down] = a * rem
+    acc[down] = np.where(t[down] < T, -a, 0.0)
+    return move.start + s * d, s * v, s * acc
+
+
+@dataclass
+class Trajectory:
+    t: np.ndarray                 # sample times (s), from 0
+    x: np.ndarray                 # position in counts (float)
+    v: np.ndarray                 # counts/s
+    i: np.ndarray                 # motor current (A)
+    tripped: bool                 # over-current cut tripped
+    max_following_error: float    # counts, max |reference - x| over the whole run
+    start: float = 0.0
+    target: float = 0.0
+    move_duration: float = 0.0    # the reference's duration (s)
+    period_s: float = 0.0
+    u: np.ndarray = field(default=None, repr=False)       # bridge average voltage (V)
+    x_ref: np.ndarray = field(default=None, repr=False)   # the DSP's reference at t
+
+    @property
+    def forward(self) -> bool:
+        return self.target >= self.start
+
+    @property
+    def final_position(self) -> float:
+        return float(self.x[-1])
+
+    @property
+    def final_count(self) -> int:
+        """The QEP counter at the end."""
+        return int(math.floor(self.x[-1] + 1e-9))
+
+    @property
+    def final_error(self) -> float:
+        """Counter at the end minus the target (counts)."""
+        return self.final_count - self.target
+
+    @property
+    def following_error(self) -> np.ndarray:
+        return self.x_ref - self.x
+
+    def max_following_error_during(self, t0: float = 0.0, t1: float | None = None) -> float:
+        t1 = self.move_duration if t1 is None else t1
+        m = (self.t >= t0) & (self.t <= t1)
+        return float(np.max(np.abs(self.following_error[m]))) if m.any() else 0.0
+
+    @property
+    def peak_current(self) -> float:
+        return float(np.max(np.abs(self.i)))
+
+    def stop_time(self, tol_counts: float = 1.0, v_tol: float = 5.0) -> float:
+        """First time after which the carriage stays within tol_counts of the target and
+        slower than v_tol counts/s (np.nan if it never settles within the run)."""
+        bad = (np.abs(self.x - self.target) > tol_counts) | (np.abs(self.v) > v_tol)
+        idx = np.flatnonzero(bad)
+        if idx.size == 0:
+            return float(self.t[0])
+        if idx[-1] == self.t.size - 1:
+            return math.nan
+        return float(self.t[idx[-1] + 1])
+
+    def crossing_times(self, positions: np.ndarray, forward: bool | None = None) -> np.ndarray:
+        """Time at which the encoder first reaches each position moving in the line's direction
+        (np.nan if never). Vectorised: running max (forward) / running min (reverse) of x, then
+        searchsorted + linear interpolation. Positions are encoder edges; the FPGA fires on
+        the first crossing only, so servo jitter never fires twice."""
+        forward = self.forward if forward is None else forward
+        p = np.asarray(positions, dtype=np.float64)
+        x = self.x if forward else -self.x
+        q = p if forward else -p
+        m = np.maximum.accumulate(x)
+        idx = np.searchsorted(m, q, side="left")        # first sample with running max >= q
+        out = np.full(q.shape, np.nan)
+        at0 = idx == 0
+        out[at0] = self.t[0]
+        ok = (idx > 0) & (idx < x.size)
+        k = idx[ok]
+        x0, x1 = x[k - 1], x[k]                          # x0 <= m[k-1] < q <= x1 = m[k]
+        frac = (q[ok] - x0) / (x1 - x0)
+        out[ok] = self.t[k - 1] + frac * (self.t[k] - self.t[k - 1])
+        return out
+
+
+def simulate_move(params: ServoParams, start_counts: float, end_counts: float, v_counts_s: float,
+                  a_counts_s2: float, settle_s: float = 0.2) -> Trajectory:
+    """Run one carriage move through the DSP loop and the plant; the run lasts the reference's
+    duration plus settle_s."""
+    p = params
+    move = Trapezoid(float(start_counts), float(end_counts), float(v_counts_s), float(a_counts_s2))
+    T = float(p.period_s)
+    n_sub = max(1, int(math.ceil(T / p.max_dt_s - 1e-9)))
+    dt = T / n_sub
+    total = move.duration + max(settle_s, 0.0)
+    n_ctrl = max(1, int(math.ceil(total / T - 1e-9)))
+    tk = np.arange(n_ctrl + 1) * T
+    xr, vr, _ = trapezoid_reference(move, tk)
+    # feed-forward per period from the reference's mean speed and acceleration over it
+    ff = p.kff_v * np.diff(xr) / T + p.kff_a * np.diff(vr) / T
+    n = n_ctrl * n_sub + 1
+    out_x = np.empty(n)
+    out_v = np.empty(n)
+    out_i = np.empty(n)
+    out_u = np.empty(n)
+    tripped, _ = _servo_kernel(ff, xr[:-1].copy(), n_sub, dt, float(start_counts), p.kp, p.ki,
+                               p.kd, p.supply_v, p.ke, p.kt, p.r_ohm, p.l_h, p.j_kg_m2,
+                               p.friction_nm, p.current_limit_a, p.counts_per_rad,
+                               out_x, out_v, out_i, out_u)
+    t = np.arange(n) * dt
+    x_ref = trapezoid_reference(move, t)[0]
+    fe = float(np.max(np.abs(x_ref - out_x)))
+    return Trajectory(t=t, x=out_x, v=out_v, i=out_i, tripped=bool(tripped),
+                      max_following_error=fe, start=float(start_counts),
+                      target=float(end_counts), move_duration=move.duration, period_s=T,
+                      u=out_u, x_ref=x_ref)
