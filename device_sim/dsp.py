@@ -25,8 +25,15 @@ class Dsp:
         self.config_digits: list[int] = []
 
     # -- bytes in, bytes out ----------------------------------------------------------------
-    def receive(self, data: bytes) -> bytes:
+    def receive(self, data: bytes, gap: bool = False) -> bytes:
+        """`gap`: the line was idle for longer than the inter-frame timeout (20 character
+        times, docs/protocol.md 2.2) before these bytes, so a frame still incomplete from
+        before is dropped (and NAKed) rather than glued to new bytes."""
         out = bytearray()
+        if gap and self.decoder.pending():
+            self.decoder.reset()
+            out += P.Frame(0, P.Kind.NAK, 0, b"\x03").encode()
+            self.printer.log("nak", reason="timeout")
         # the handshake byte is answered only between frames (docs/protocol.md 2.1)
         if self.decoder.pending() == 0:
             sync = data.find(P.SYNC)

@@ -128,11 +128,10 @@ class Fpga:
         self.min_level_fires: int | None = None
 
     def flush_unfired(self) -> None:
-        """FLUSH block (docs/protocol.md 3.1): drop what is queued but not fired; the next
-        block must start at the first fire not made."""
+        """FLUSH block (docs/protocol.md 3.1): drop the DMA ring; the FIFOs keep their words
+        (they will fire); the next block must start at the first fire not in the FIFOs."""
         self.ring.clear()
-        self.fifo.clear()
-        self.queued_fires = self.loaded_fires = self.fired
+        self.queued_fires = self.loaded_fires
 
     def fifo_level_fires(self) -> int:
         return self.loaded_fires - self.fired

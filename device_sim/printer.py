@@ -131,10 +131,12 @@ class Printer:
             out.append(b)
         return bytes(out)
 
-    def serial_in(self, data: bytes) -> bytes:
+    def serial_in(self, data: bytes, gap: bool = True) -> bytes:
+        """Bytes from the host; `gap` says the line was idle before them for longer than
+        the DSP's inter-frame timeout."""
         data = self._noise(data)
         self.log("serial_rx", hex=data.hex())
-        return self._noise(self.dsp.receive(data))
+        return self._noise(self.dsp.receive(data, gap))
 
     # -- data channel -----------------------------------------------------------------------
     def data_in(self, data: bytes) -> None:
@@ -156,6 +158,9 @@ class Printer:
             else:
                 ready = self.time
             fault = self.fpga.accept(block, ready)
+            if block.kind == P.BLOCK_FLUSH and fault == P.Fault.NONE:
+                self._pass_blocks_received = self.fpga.blocks_moved
+                self._report(P.REPORT_FLUSHED)
             if fault != P.Fault.NONE:
                 self.log("block_refused", pass_id=block.pass_id, first_fire=block.first_fire,
                          fault=fault.name)
@@ -180,8 +185,6 @@ class Printer:
 
     def data_link_up(self) -> None:
         self.link_alive = True
-        self.starve_guard = bool(prof.raw["fpga"].get("starve_guard", True)) \
-            if self.faults.starve_guard is None else bool(self.faults.starve_guard)
 
     def host_latency(self) -> float:
         """Host DMA refill latency (docs/emulator.md): how long after a ring slot frees the
@@ -212,8 +215,7 @@ class Printer:
         if f.underrun_mask:
             flags |= P.REPORT_UNDERRUN
         levels = [f.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
-        self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved,
-                                   f.fired if self.line is None or self.line.done else f.loaded_fires,
+        self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved, f.fired,
                                    tuple(levels)).encode()
 
     def pump(self) -> None:
@@ -267,7 +269,7 @@ class Printer:
             if on:
                 flags |= bit
         motion = P.Motion.PRINTING if self.busy() else self.motion
-        fires = self.fpga.fired if not self.busy() else self.fpga.loaded_fires
+        fires = self.fpga.fired
         levels = [self.fpga.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
         return P.Status(P.Result.OK, flags, motion, self.counter(), 0, self.paper_steps,
                         self.fpga.pass_id, fires, self.fault, self.fault_head, self.fault_pass,
@@ -400,6 +402,10 @@ class Printer:
 
     def job_begin(self, job: int, x0: int, width: int, height: int, dpi: int, row_nm: int,
                   y0: int) -> None:
+        if self.job is not None and self.job["job"] == job and (
+                x0, width, height, dpi, row_nm, y0) == tuple(self.job[k] for k in (
+                "x0", "width", "height", "dpi", "row_nm", "y0")):
+            return                      # the host reconnected and said it again
         if self.media:
             self.media.close()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import selectors
 import socket
+import time
 import tty
 
 from .printer import Printer
@@ -33,6 +34,7 @@ class EmulatorServer:
             self.master = None
             self.serial_listener = self._listen(host, serial_tcp_port, self._accept_serial)
         self.data_listener = self._listen(host, data_port, self._accept_data)
+        self._last_serial = 0.0
         self._data_conn: socket.socket | None = None
 
     def _listen(self, host, port, handler) -> socket.socket:
@@ -67,10 +69,18 @@ class EmulatorServer:
             return
         except OSError:
             return
-        out = self.printer.serial_in(data)
+        out = self.printer.serial_in(data, self._gap())
         if out:
             os.write(fd, out)
         self._flush_data_out()
+
+    def _gap(self) -> bool:
+        """Inter-frame timeout: 20 character times at the line's baud rate, but never less
+        than 50 ms, the scheduling slack of a host that is not real time."""
+        now = time.monotonic()
+        gap = now - self._last_serial > max(0.05, 200 / self.printer.baud)
+        self._last_serial = now
+        return gap
 
     def _accept_serial(self, sock) -> None:
         conn, _ = sock.accept()
@@ -91,7 +101,7 @@ class EmulatorServer:
             conn.close()
             self._serial_conn = None
             return
-        out = self.printer.serial_in(data)
+        out = self.printer.serial_in(data, self._gap())
         if out:
             conn.sendall(out)
         self._flush_data_out()

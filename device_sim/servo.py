@@ -55,7 +55,8 @@ class ServoParams:
     period_s: float = 0.00005           # servo sampling period
     kp: float = 0.0                     # V per count of position error (eq. 3-10 Kp)
     ti_s: float = 1.32                  # integral time, s (Ki = Kp T / Ti)
-    kd: float = 0.0                     # V per count (eq. 3-10 Kd; 0: the thesis' PI)
+    kv: float = 0.0                     # V per count/s of speed error (eq. 3-10 Kd / (m T))
+    speed_window: int = 1               # m: periods over which the speed error is measured
     kff_v: float = 0.0                  # V per count/s of reference speed
     kff_a: float = 0.0                  # V per count/s^2 of reference acceleration
     max_dt_s: float = 20e-6             # plant integration step (upper bound)
@@ -151,17 +152,21 @@ def tuned_gains(p: ServoParams, period_s: float) -> tuple[float, float]:
 
 # -- the kernel ------------------------------------------------------------------------------
 @njit(cache=True)
-def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kd, vmax, ke, kt, r, l, j, tf, ilim, cpr,
+def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kdw, m, vmax, ke, kt, r, l, j, tf, ilim, cpr,
                   out_x, out_v, out_i, out_u):
     """Run len(ff) controller periods of n_sub plant steps each.  ff[k] is the feed-forward
     voltage for period k, xref[k] the reference at its start.  Records the state after every
-    plant step (index 0 = initial).  Returns (tripped, samples written)."""
+    plant step (index 0 = initial).  Returns (tripped, samples written).
+
+    Controller (velocity form, seed eq. 3-10) on the position error e = xref - count:
+        du = kp (e[k] - e[k-1]) + ki e[k] + kdw ((e[k] - e[k-m]) - (e[k-1] - e[k-1-m]))
+    i.e. u = kp e + ki sum(e) + kdw (e[k] - e[k-m]): the last term is the speed error
+    measured over a window of m periods."""
     x = x0
     v = 0.0          # counts/s
     i = 0.0
-    u = 0.0          # PI output (the velocity-form accumulator)
-    e1 = 0.0
-    e2 = 0.0
+    u = 0.0          # the velocity-form accumulator
+    hist = np.zeros(m + 2)     # e[k-1] .. e[k-1-m] in a ring
     tripped = False
     out_x[0] = x
     out_v[0] = 0.0
@@ -170,16 +175,18 @@ def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kd, vmax, ke, kt, r, l, j, tf
     ea = math.exp(-dt * r / l)
     mean_f = (l / (r * dt)) * (1.0 - ea)      # mean of the exponential over the step
     n = 0
-    first = True
+    h = m + 2
     for k in range(ff.shape[0]):
-        # QEP count: edges at integer positions
-        cnt = math.floor(x + 1e-9)
+        cnt = math.floor(x + 1e-9)             # QEP count: edges at integer positions
         e = xref[k] - cnt
-        if first:
-            e1 = e
-            e2 = e
-            first = False
-        du = kp * (e - e1) + ki * e + kd * (e - 2.0 * e1 + e2)
+        if k == 0:
+            for q in range(h):
+                hist[q] = e
+        e1 = hist[(k - 1) % h]
+        em = hist[(k - m) % h]
+        em1 = hist[(k - 1 - m) % h]
+        du = kp * (e - e1) + ki * e + kdw * ((e - em) - (e1 - em1))
+        hist[k % h] = e
         u += du
         volts = u + ff[k]
         # anti-windup: the accumulator never asks beyond the bridge
@@ -189,8 +196,6 @@ def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kd, vmax, ke, kt, r, l, j, tf
         elif volts < -vmax:
             u -= volts + vmax
             volts = -vmax
-        e2 = e1
-        e1 = e
         for s in range(n_sub):
             w = v / cpr
             iss = (volts - ke * w) / r
@@ -361,7 +366,7 @@ def simulate_move(params: ServoParams, start_counts: float, end_counts: float, v
     out_i = np.empty(n)
     out_u = np.empty(n)
     tripped, _ = _servo_kernel(ff, xr[:-1].copy(), n_sub, dt, float(start_counts), p.kp, p.ki,
-                               p.kd, p.supply_v, p.ke, p.kt, p.r_ohm, p.l_h, p.j_kg_m2,
+                               p.kv / (p.speed_window * T), int(p.speed_window), p.supply_v, p.ke, p.kt, p.r_ohm, p.l_h, p.j_kg_m2,
                                p.friction_nm, p.current_limit_a, p.counts_per_rad,
                                out_x, out_v, out_i, out_u)
     t = np.arange(n) * dt

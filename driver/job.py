@@ -22,6 +22,7 @@ from ..rip.swath import PassData
 log = logging.getLogger("wideprint.job")
 
 HEAD_MASK_ALL = 0xFF
+MAX_RECOVERIES = 5          # reconnections per pass before the job fails
 
 
 class JobError(RuntimeError):
@@ -46,6 +47,7 @@ class JobReport:
     height_rows: int = 0
     area_m2: float = 0.0
     retries: int = 0
+    recoveries: int = 0
     min_fifo_words: int | None = None
     wall_s: float = 0.0
     message: str = ""
@@ -164,23 +166,63 @@ class PrintJob:
                            f"{prof.max_fire_hz:.0f} Hz (limit {limit:.0f} mm/s)")
         return int(self.speed_mm_s / 25.4 * prof.counts_per_inch)
 
+    def _recovering(self, step, what: str):
+        """Run a step; on a lost link reconnect and run it again (each step is written to
+        pick up from the device's status, so nothing is done twice)."""
+        tries = 0
+        while True:
+            try:
+                return step()
+            except (LinkError, StreamError) as exc:
+                tries += 1
+                if tries > MAX_RECOVERIES:
+                    raise
+                self.report.recoveries += 1
+                log.warning("%s: %s; reconnecting (%d of %d)", what, exc, tries, MAX_RECOVERIES)
+                self.on_event("recover", what=what, error=str(exc), attempt=tries)
+                self._reconnect(data=isinstance(exc, StreamError))
+
+    def _reconnect(self, data: bool) -> None:
+        last = None
+        for attempt in range(MAX_RECOVERIES):
+            try:
+                if data or not getattr(self.dev.data, "open", True):
+                    self.dev.data.reconnect()
+                self.dev.connect()
+                return
+            except (LinkError, OSError) as exc:
+                last = exc
+                time.sleep(0.05 * (attempt + 1) if self.dev.emulator is None else 0)
+        raise LinkError(f"cannot reconnect to the printer: {last}")
+
     def print_pass(self, pd: PassData, x0: int) -> None:
+        self._recovering(lambda: self._print_pass_once(pd, x0), f"pass {pd.index}")
+
+    def _print_pass_once(self, pd: PassData, x0: int) -> None:
         link, prof = self.dev.link, self.profile
         dpi = self.rip.settings.dpi
         k = prof.k(dpi)
         first = x0 // k + pd.first_column
-        speed, accel = self.line_speed(), prof.accel_counts_s2()
-        link.command(P.Op.SET_LINE, struct.pack(P.SET_LINE_FMT, pd.index, pd.direction, dpi,
-                                                first, pd.fires, speed, accel))
-        link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
-        link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
-        link.write_reg(P.REG_WE_EN, 1)
         info = self.dev.info or {}
         streamer = PassStreamer(self.dev.data, pd.index, pd.words,
                                 info.get("block_fires", prof.block_fires),
                                 info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
-        streamer.preload()
-        link.command(P.Op.START_LINE)
+        st = link.status()
+        if st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
+                st.flags & P.FLAG_LINE_DONE and st.fires_done == pd.fires:
+            link.write_reg(P.REG_WE_EN, 0)          # it finished while we were away
+            return
+        if st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
+            streamer.resume()                       # the line is running or starved: feed it
+        else:
+            speed, accel = self.line_speed(), prof.accel_counts_s2()
+            link.command(P.Op.SET_LINE, struct.pack(P.SET_LINE_FMT, pd.index, pd.direction,
+                                                    dpi, first, pd.fires, speed, accel))
+            link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
+            link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
+            link.write_reg(P.REG_WE_EN, 1)
+            streamer.preload()
+            link.command(P.Op.START_LINE)
         streamer.start()
         try:
             st = self._watch_line(pd, streamer)
@@ -218,18 +260,19 @@ class PrintJob:
         rep.width_dots, rep.height_rows = rip.width, rip.height
         try:
             self.line_speed()
-            self.prepare()
-            x0 = self.place()
+            self._recovering(self.prepare, "connecting")
+            x0 = self._recovering(self.place, "placing the job")
             planner = rip.planner()
             rep.passes_total = planner.total_passes
             link = self.dev.link
-            link.command(P.Op.JOB_BEGIN, struct.pack(
-                P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height, rip.settings.dpi,
-                prof.row_nm, planner.y0_rows))
-            paper0 = link.status().paper_steps
+            begin = struct.pack(P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height,
+                                rip.settings.dpi, prof.row_nm, planner.y0_rows)
+            self._recovering(lambda: link.command(P.Op.JOB_BEGIN, begin), "starting the job")
+            paper0 = self._recovering(lambda: link.status().paper_steps, "reading the paper position")
             top0 = planner.top_row(0)
             for pd in rip.passes(planner):
-                self.feed_to(paper0 + prof.feed_steps_for_rows(pd.top_row - top0))
+                target = paper0 + prof.feed_steps_for_rows(pd.top_row - top0)
+                self._recovering(lambda: self.feed_to(target), f"feed before pass {pd.index}")
                 self.on_event("pass", index=pd.index, total=planner.total_passes,
                               direction=pd.direction, fires=pd.fires)
                 self.print_pass(pd, x0)
@@ -237,10 +280,12 @@ class PrintJob:
                 for c in range(4):
                     rep.drops[c] += int(pd.dots[c])
             # feed the last rows out past the heads, then park
-            self.feed_to(paper0 + prof.feed_steps_for_rows(
-                planner.top_row(planner.total_passes - 1) - top0 + prof.swath_rows))
-            link.command(P.Op.JOB_END, struct.pack("<I", self.job_id))
-            link.command(P.Op.PARK)
+            out = paper0 + prof.feed_steps_for_rows(
+                planner.top_row(planner.total_passes - 1) - top0 + prof.swath_rows)
+            self._recovering(lambda: self.feed_to(out), "feeding the job out")
+            self._recovering(lambda: link.command(P.Op.JOB_END, struct.pack("<I", self.job_id)),
+                             "ending the job")
+            self._recovering(lambda: link.command(P.Op.PARK), "parking")
             rep.passes_skipped = rep.passes_total - rep.passes_printed
             rep.state = "done"
         except (JobError, LinkError, DeviceError, StreamError) as exc:

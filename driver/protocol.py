@@ -312,6 +312,7 @@ REPORT_TYPE = 0x81
 REPORT_UNDERRUN = 1 << 0
 REPORT_DATA_ERROR = 1 << 1
 REPORT_PASS_DONE = 1 << 2
+REPORT_FLUSHED = 1 << 3     # the answer to a FLUSH block: `blocks` = where to resume
 WORDS_PER_FIRE = 8          # 128 nozzles / 16-bit FIFO words
 MAX_BLOCK_WORDS = 65536
 

@@ -67,6 +67,24 @@ class PassStreamer:
         if self.sent < len(self.blocks) and timeout:
             self._reports(timeout)
 
+    def resume(self, timeout: float = 5.0) -> None:
+        """After a lost link: FLUSH the device's DMA ring and carry on from the first block
+        that is not in its FIFOs (the FLUSHED report says which)."""
+        self._stop.clear()
+        try:
+            self.data.send(P.encode_block(self.pass_id, 0, 0, np.zeros((0, 0, 8), np.uint16),
+                                          kind=P.BLOCK_FLUSH))
+        except (ConnectionError, OSError) as exc:
+            raise StreamError(f"pass {self.pass_id}: data link lost ({exc})") from exc
+        deadline = time.monotonic() + timeout
+        while True:
+            for rep in self.decoder.feed(self.data.recv(0.02)):
+                if rep.pass_id == self.pass_id and rep.flags & P.REPORT_FLUSHED:
+                    self.sent = self.acked = rep.blocks
+                    return
+            if time.monotonic() > deadline:
+                raise StreamError(f"pass {self.pass_id}: the printer did not answer the FLUSH")
+
     def preload(self, timeout: float = 5.0) -> None:
         """Fill the ring and the FIFOs before the carriage moves."""
         deadline = time.monotonic() + timeout

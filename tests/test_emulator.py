@@ -155,7 +155,6 @@ def test_dead_nozzle_misses_exactly_its_dots(tmp_path, profile):
     (Faults(overtemp=[("K2", 0)]), r"over-temperature \(head K2, pass 0, column"),
     (Faults(paper_length_mm=5), r"paper out"),
     (Faults(encoder_glitch_at=9_000), r"encoder glitch.*pass 0, column"),
-    (Faults(data_drop_after=3), r"pass 0: data link lost"),
     (Faults(fifo_words=128, host_jitter="loaded", seed=3, starve_guard=0),
      r"FIFO underrun.*pass \d+, column"),
 ])
