@@ -43,6 +43,8 @@ class LineRun:
         self.pauses = 0
         self.fault = P.Fault.NONE
         self.min_level: int | None = None
+        self._pending: list[tuple[int, int, np.ndarray]] = []   # fired, not yet landed
+        self._pending_fires = 0
         self._plan_stops()
 
     def _segment(self, i0: int, move: Trapezoid, t_start: float) -> None:
@@ -177,24 +179,49 @@ class LineRun:
             block = fifo.popleft()
             self._fire_block(block, block.first_fire)
 
+    LAND_BATCH = 8192   # fires landed per batch: one unpack and one scatter per head
+
     def _fire_block(self, block: P.Block, first: int) -> None:
-        pr = self.printer
         last = min(first + block.fires, self.stop_index)
         count = last - first
         if count <= 0:
             return
-        mask_heads = [h for h in range(pr.n_heads) if block.head_mask >> h & 1]
-        cols = self.columns[first:last]
-        for part, h in enumerate(mask_heads):
-            bits = P.words_to_nozzles(block.words[part, :count])          # (count, 128)
-            bad = np.flatnonzero(bits[:, 0] | bits[:, 127])
-            if bad.size:
-                self._stop_at(first + int(bad[0]), P.Fault.HEAD_DATA, h)
-                bits = bits[:bad[0]]
-            pr.land_drops(h, cols[:bits.shape[0]], bits, self.forward)
+        words = block.words[:, :count]
+        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3)
+        bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
+        if bad.any():
+            part, fire = np.argwhere(bad)[np.argmin(np.argwhere(bad)[:, 1])]
+            mask_heads = [h for h in range(self.printer.n_heads) if block.head_mask >> h & 1]
+            self._stop_at(first + int(fire), P.Fault.HEAD_DATA, mask_heads[int(part)])
+            count = int(fire)
+            words = words[:, :count]
+            if count == 0:
+                return
+        self._pending.append((first, block.head_mask, words))
+        self._pending_fires += count
+        if self._pending_fires >= self.LAND_BATCH:
+            self.land_pending()
+
+    def land_pending(self) -> None:
+        """Drops are placed by position, not time, so fired blocks are landed in batches."""
+        if not self._pending:
+            return
+        pr = self.printer
+        by_mask: dict[int, list] = {}
+        for first, mask, words in self._pending:
+            by_mask.setdefault(mask, []).append((first, words))
+        self._pending, self._pending_fires = [], 0
+        for mask, items in by_mask.items():
+            idx = np.concatenate([np.arange(f, f + w.shape[1]) for f, w in items])
+            words = np.concatenate([w for _, w in items], axis=1)
+            cols = self.columns[idx]
+            heads = [h for h in range(pr.n_heads) if mask >> h & 1]
+            for part, h in enumerate(heads):
+                pr.land_drops(h, cols, P.words_to_nozzles(words[part]), self.forward)
 
     def _end(self, fired: int, fault: P.Fault, head: int = 0xFF) -> None:
         pr = self.printer
+        self.land_pending()
         self.done = True
         self.fault = fault
         pr.fpga.fired = fired

@@ -241,6 +241,7 @@ class Printer:
             self.fpga.underrun_mask |= (1 << self.n_heads) - 1
         self.fpga.write_reg(P.REG_WE_EN, 0)
         if self.line is not None and not self.line.done:
+            self.line.land_pending()
             self.line.done = True
             self.line.fault = fault
         self.motion = P.Motion.IDLE

@@ -8,6 +8,7 @@ import os
 import selectors
 import socket
 import time
+import traceback
 import tty
 
 from .printer import Printer
@@ -155,7 +156,11 @@ class EmulatorServer:
         self.running = True
         while self.running:
             for key, _ in self.sel.select(poll):
-                key.data(key.fileobj)
+                try:
+                    key.data(key.fileobj)
+                except Exception:  # noqa: BLE001 - a device keeps running; the log says why
+                    traceback.print_exc()
+                    self.printer.log("emulator_error", error=traceback.format_exc(limit=3))
 
     def stop(self) -> None:
         self.running = False

@@ -1,27 +1,37 @@
 """The carriage servo: DSP position loop + L298/LM393 power stage + PITTMAN DC motor + belt.
 
-Seed 000 ch. 3 (docs/motion.md).  The DSP plans a trapezoidal position reference in encoder
-counts (accelerate, cruise, decelerate), samples the QEP counter every `period_s`, and runs
-the incremental (velocity-form) PI of seed eq. 3-10 on the position error (counts -> volts),
-plus velocity and acceleration feed-forward computed from the reference.  The PWM duty is
-modelled as its average voltage (seed eq. 3-6/3-7: the L298 is a pure gain), saturating at
-the supply.  The LM393 cuts the bridge when the sense current reaches 2 A: modelled as an
-ideal current clamp, and the cut is reported.
+Seed 000 ch. 3; docs/motion.md explains every number.  The DSP plans a trapezoidal position
+reference in encoder counts (accelerate, cruise, decelerate), samples the QEP counter every
+`period_s` and runs the incremental (velocity-form) controller of seed eq. 3-10 on the
+position error e = reference - count (counts -> volts):
+
+    du[k] = kp (e[k] - e[k-1]) + ki e[k] + (kv / W) ((e[k] - e[k-m]) - (e[k-1] - e[k-1-m]))
+    u[k]  = u[k-1] + du[k]          (clamped so that the bridge voltage stays within supply)
+    V[k]  = u[k] + kff_v v_ref + kff_a a_ref
+
+i.e. u = kp e + ki sum(e) + kv (speed error measured over the window W = m T): the thesis'
+PI speed regulator (Kp on the speed error, Kp/Ti on its integral, the position error) plus
+an integral of the position error, plus velocity and acceleration feed-forward from the
+reference's mean over the coming period.  The PWM is modelled as its average voltage (seed
+eq. 3-6/3-7: the L298 is a pure gain), saturating at +-supply.  The LM393 cuts the bridge
+when the sense current reaches 2 A: modelled as an ideal current clamp, and the cut is
+reported (`Trajectory.tripped`).
 
 The plant (seed eq. 3-1/3-2) is integrated with a fixed step of at most `max_dt_s` (20 us;
 the electrical time constant L/R is 0.83 ms): per step the armature current is advanced
-exactly (exponential) at the step's back-EMF, the current clamp is applied, then the
-mechanics take the step's mean torque (semi-implicit).  All of it runs in one numba kernel:
-a 5 s line at a 50 us servo period costs a few milliseconds.
+exactly (exponential) at the step's back-EMF, clamped, then the mechanics take the step's
+mean torque (semi-implicit), with optional Coulomb friction.  All of it runs in one numba
+kernel: a 5.6 s production line costs about 10 ms.
 
-Units inside: position in encoder counts (1/600 inch of belt), speed counts/s, current A,
-voltage V.  `counts_per_rad` = pulley radius / count pitch = 118.1 counts per motor radian.
+Units: position in encoder counts (1/600 inch of belt), speed counts/s, current A, voltage
+V, time s.  `counts_per_rad` = pulley radius / count pitch = 118.1 counts per motor radian.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -30,33 +40,52 @@ from .motion import Trapezoid
 
 MM_PER_INCH = 25.4
 
-# seed 000 3.3.2.4: speed-feedback scale K_g (V per rad/s) and PWM amplifier gain K_w (V/V);
-# used only to express the seed's (Kp, Ti) in our units (docs/motion.md "Gains").
+# seed 000 3.3.2.4: speed-feedback scale K_g (V per rad/s), PWM amplifier gain K_w (V/V), and
+# the thesis' PI (Ziegler-Nichols) with its 50 ms sampling.  Used to express the seed's gains
+# in our units (docs/motion.md, "Gains") and to reproduce the thesis test.
 SEED_KG_V_PER_RAD_S = 0.25
 SEED_KW = 2.4
+SEED_KP = 32.0
+SEED_TI_S = 1.32
 SEED_PERIOD_S = 0.05
+
+# Recommended production sampling period (docs/motion.md): a 1 kHz loop with the speed error
+# measured over 4 ms.  Faster sampling buys nothing with a 600 counts/inch strip.
+PRODUCTION_PERIOD_S = 0.001
+
+
+def seed_gains(kp_seed: float = SEED_KP, ti_seed: float = SEED_TI_S,
+               counts_per_rad: float = 5.0 / (MM_PER_INCH / 600)) -> tuple[float, float]:
+    """The thesis' PI in our units: (kp V/count, kv V per count/s).
+
+    Its regulator acts on the speed error through K_g and drives the bridge through K_w:
+    V = K_w Kp (K_g e_w + (K_g / Ti) integral(e_w)), e_w in rad/s.  The integral of the speed
+    error is the position error, so  kv = K_w K_g Kp / counts_per_rad  (0.163 V per count/s)
+    and kp = kv / Ti  (0.123 V per count)."""
+    kv = SEED_KW * SEED_KG_V_PER_RAD_S * kp_seed / counts_per_rad
+    return kv / ti_seed, kv
 
 
 @dataclass
 class ServoParams:
     """Plant, power stage and DSP controller of the carriage axis."""
-    # plant (seed 000 table 3-3, profile [carriage])
+    # plant (seed 000 table 3-3; profile [carriage])
     ke: float = 0.0287                  # back-EMF constant, V s/rad
     kt: float = 0.0287                  # torque constant, N m/A
     r_ohm: float = 1.89
     l_h: float = 0.00156
     j_kg_m2: float = 1e-4               # at the motor shaft, carriage included
-    friction_nm: float = 0.0            # Coulomb friction at the shaft (not in the profile: 0)
+    friction_nm: float = 0.0            # Coulomb friction at the shaft (profile: optional)
     supply_v: float = 19.1              # L298 bridge: the average voltage saturates here
     current_limit_a: float = 2.0        # LM393 cut
     pulley_diameter_mm: float = 10.0
     counts_per_inch: int = 600          # 150 lpi x4
     # DSP
-    period_s: float = 0.00005           # servo sampling period
-    kp: float = 0.0                     # V per count of position error (eq. 3-10 Kp)
-    ti_s: float = 1.32                  # integral time, s (Ki = Kp T / Ti)
-    kv: float = 0.0                     # V per count/s of speed error (eq. 3-10 Kd / (m T))
-    speed_window: int = 1               # m: periods over which the speed error is measured
+    period_s: float = PRODUCTION_PERIOD_S   # servo sampling period T
+    kp: float = 0.0                     # V per count of position error
+    ti_s: float = SEED_TI_S             # integral time of the position error (ki = kp T / Ti)
+    kv: float = 0.0                     # V per count/s of speed error
+    speed_window: int = 1               # m: the speed error is measured over m periods
     kff_v: float = 0.0                  # V per count/s of reference speed
     kff_a: float = 0.0                  # V per count/s^2 of reference acceleration
     max_dt_s: float = 20e-6             # plant integration step (upper bound)
@@ -77,29 +106,47 @@ class ServoParams:
 
     @property
     def tau_elec_s(self) -> float:
+        """Armature time constant T_a = L / R (0.83 ms)."""
         return self.l_h / self.r_ohm
 
     @property
     def ki(self) -> float:
-        """Integral gain per sample, V per count: Kp T / Ti (seed 3-9)."""
+        """Integral gain per sample, V per count: kp T / Ti (seed 3-9)."""
         return self.kp * self.period_s / self.ti_s if self.ti_s > 0 else 0.0
 
+    @property
+    def max_accel_counts_s2(self) -> float:
+        """Acceleration the current cut allows (no friction): Kt I_lim / J at the pulley."""
+        return (self.kt * self.current_limit_a - self.friction_nm) / self.j_kg_m2 * self.counts_per_rad
+
     def model_ff(self) -> tuple[float, float]:
-        """Feed-forward gains from the nominal model: V = Ke w + R J alpha / Kt."""
+        """Feed-forward gains from the nominal model: V = Ke w + R J alpha / Kt (per count)."""
         c = self.counts_per_rad
         return self.ke / c, self.r_ohm * self.j_kg_m2 / (self.kt * c)
 
     def with_period(self, period_s: float) -> "ServoParams":
-        """The same axis with the DSP loop re-tuned for another sampling period."""
-        kp, ti = tuned_gains(self, period_s)
-        kv, ka = self.model_ff()
-        return replace(self, period_s=period_s, kp=kp, ti_s=ti, kff_v=kv, kff_a=ka)
+        """The same axis with the DSP loop tuned for a sampling period (tuned_gains)."""
+        kp, kv, m = tuned_gains(self, period_s)
+        fv, fa = self.model_ff()
+        return replace(self, period_s=float(period_s), kp=kp, kv=kv, speed_window=m,
+                       kff_v=fv, kff_a=fa)
+
+    def with_seed_gains(self, period_s: float = SEED_PERIOD_S) -> "ServoParams":
+        """The thesis' Kp = 32, Ti = 1.32 mapped literally (seed_gains), no position integral:
+        unstable at 50 ms on the real motor (docs/motion.md).  For comparison only."""
+        kp, kv = seed_gains(counts_per_rad=self.counts_per_rad)
+        fv, fa = self.model_ff()
+        return replace(self, period_s=float(period_s), kp=kp, kv=kv, speed_window=1,
+                       ti_s=0.0, kff_v=fv, kff_a=fa)
 
     @classmethod
     def from_profile(cls, profile, period_s: float | None = None) -> "ServoParams":
+        """Plant from profile.raw["carriage"], counts/inch from the profile, the loop tuned for
+        period_s (default: the profile's servo_period_s)."""
         c = profile.raw["carriage"]
         base = cls(
-            ke=float(c.get("motor_ke", 0.0287)), kt=float(c.get("motor_kt", c.get("motor_ke", 0.0287))),
+            ke=float(c.get("motor_ke", 0.0287)),
+            kt=float(c.get("motor_kt", c.get("motor_ke", 0.0287))),
             r_ohm=float(c.get("motor_r_ohm", 1.89)), l_h=float(c.get("motor_l_h", 0.00156)),
             j_kg_m2=float(c.get("inertia_kg_m2", 1e-4)),
             friction_nm=float(c.get("friction_nm", 0.0)),
@@ -107,47 +154,118 @@ class ServoParams:
             current_limit_a=float(c.get("current_limit_a", 2.0)),
             pulley_diameter_mm=float(c.get("pulley_diameter_mm", 10.0)),
             counts_per_inch=int(profile.counts_per_inch),
-            ti_s=float(c.get("ti_s", 1.32)),
+            ti_s=float(c.get("ti_s", SEED_TI_S)),
         )
-        T = float(period_s if period_s is not None else c.get("servo_period_s", 0.00005))
+        T = float(period_s if period_s is not None
+                  else c.get("servo_period_s", PRODUCTION_PERIOD_S))
         return base.with_period(T)
 
     @classmethod
     def thesis(cls, profile=None) -> "ServoParams":
-        """The thesis set-up: 50 ms sampling (seed 000 3.3.1)."""
+        """The thesis set-up: 50 ms sampling (seed 000 3.3.1), gains tuned for it."""
         if profile is not None:
             return cls.from_profile(profile, period_s=SEED_PERIOD_S)
         return cls().with_period(SEED_PERIOD_S)
 
-    # -- the seed's gains in our units -------------------------------------------------------
-    def seed_gain_unit(self) -> float:
-        """V per count corresponding to Kp = 1 of the thesis: its PI acts on the speed error
-        through K_g = 0.25 V per rad/s and drives the bridge through K_w = 2.4, so one count of
-        position error accrued over one 50 ms period is K_w K_g / (counts_per_rad T) volts."""
-        return SEED_KW * SEED_KG_V_PER_RAD_S / (self.counts_per_rad * SEED_PERIOD_S)
+
+# -- tuning ------------------------------------------------------------------------------------
+SPEED_WINDOW_S = 0.004        # speed error measured over >= 4 ms of encoder counts
+SPEED_NOISE_V = 0.6           # volts the speed term may jump when one count enters the window
+DAMPING = 0.55                # target damping ratio of the position loop
+FAST_PERIOD_S = 0.004         # at or below: continuous design; above: discrete (ZOH) design
 
 
-def tuned_gains(p: ServoParams, period_s: float) -> tuple[float, float]:
-    """(Kp in V per count, Ti in s) for a sampling period.
+def tuned_gains(p: ServoParams, period_s: float) -> tuple[float, float, int]:
+    """(kp V/count, kv V per count/s, speed window m periods) for a sampling period.
 
-    The loop is P + I on position with the motor's own back-EMF as the only damping, so
-    the proportional gain is bounded twice: by sampling (the discrete loop with a zero-order
-    hold over T) and by damping (tau_m K Kp <= ~0.4, K = counts/s per volt).  We take the
-    smaller of 30 % of the discrete critical gain and the damping bound; Ti stays the seed's
-    1.32 s (docs/motion.md, "Gains")."""
-    K = p.counts_per_rad / p.ke                         # counts/s per volt at steady speed
+    The speed error is the count difference over a window W = m T; one count entering or
+    leaving the window moves the speed term by kv / W volts, so kv <= SPEED_NOISE_V * W
+    (quantisation of a 600 counts/inch strip; a larger kv chops the current into the 2 A
+    cut).  Fast loops (T <= 4 ms): W = 4 ms and kp for a damping ratio of 0.55 of the
+    continuous loop  tau s^2 + (1 + K kv) s + K kp  (K = counts/s per volt, tau = J R/Ke Kt).
+    Slow loops: the discrete closed loop (ZOH plant incl. the armature inductance, one-period
+    speed window) is searched for the stiffest kp whose poles are all inside the unit circle
+    with a damping ratio >= 0.5.  docs/motion.md, "Gains"."""
+    K = p.counts_per_rad / p.ke
     tau = p.tau_mech_s
-    a = math.exp(-period_s / tau)
-    # ZOH discretisation of K/(s (tau s + 1)): b1 z + b0 over (z - 1)(z - a)
-    b1 = K * (period_s - tau * (1 - a))
-    b0 = K * (tau * (1 - a) - a * period_s)
-    # P-only critical gain: the constant term a + Kp b0 reaches 1 (complex pair on |z| = 1)
-    # or the real root crosses -1: 1 + (1 + a) + Kp (b0 - b1) = 0 -> Kp = (2 + 2a) / (b1 - b0)
-    k_complex = (1 - a) / b0 if b0 > 0 else math.inf
-    k_real = (2 + 2 * a) / (b1 - b0) if b1 > b0 else math.inf
-    k_crit = min(k_complex, k_real)
-    k_damp = 0.4 / (tau * K)
-    return min(0.3 * k_crit, k_damp), p.ti_s
+    if period_s <= FAST_PERIOD_S:
+        m = max(1, int(round(SPEED_WINDOW_S / period_s)))
+        kv = SPEED_NOISE_V * m * period_s
+        kp = (1 + K * kv) ** 2 / (4 * DAMPING ** 2 * tau * K)
+        return kp, kv, m
+    kp, kv = _discrete_design(p.ke, p.kt, p.r_ohm, p.l_h, p.j_kg_m2, p.counts_per_rad,
+                              p.ti_s, float(period_s))
+    return kp, kv, 1
+
+
+def _expm(a: np.ndarray) -> np.ndarray:
+    norm = float(np.abs(a).sum(axis=0).max())
+    s = max(0, int(math.ceil(math.log2(norm))) + 1) if norm > 0 else 0
+    b = a / 2 ** s
+    out = np.eye(a.shape[0])
+    term = np.eye(a.shape[0])
+    for k in range(1, 30):
+        term = term @ b / k
+        out = out + term
+    for _ in range(s):
+        out = out @ out
+    return out
+
+
+def _zoh_plant(ke, kt, r, l, j, cpr, T):
+    """Exact ZOH discretisation of the (x counts, v counts/s, i A) plant for one period."""
+    a = np.array([[0, 1, 0], [0, 0, cpr * kt / j], [0, -ke / cpr / l, -r / l]], dtype=float)
+    b = np.array([0, 0, 1 / l], dtype=float)
+    m = np.zeros((4, 4))
+    m[:3, :3] = a * T
+    m[:3, 3] = b * T
+    e = _expm(m)
+    return e[:3, :3], e[:3, 3]
+
+
+def closed_loop_poles(p: ServoParams, period_s: float | None = None) -> np.ndarray:
+    """Poles (z-plane) of the sampled loop with p's gains (no quantisation, no saturation)."""
+    T = float(period_s or p.period_s)
+    return _poles(p.ke, p.kt, p.r_ohm, p.l_h, p.j_kg_m2, p.counts_per_rad, T, p.kp,
+                  p.kp * T / p.ti_s if p.ti_s > 0 else 0.0, p.kv / (p.speed_window * T),
+                  int(p.speed_window))
+
+
+def _poles(ke, kt, r, l, j, cpr, T, kp, ki, kdw, m):
+    ad, bd = _zoh_plant(ke, kt, r, l, j, cpr, T)
+    # state: x, v, i, sum(e), e[k-1] .. e[k-m]; reference 0 so e[k] = -x[k]
+    n = 4 + m
+    a = np.zeros((n, n))
+    u = np.zeros(n)                      # u[k] = kp e + ki (S + e) + kdw (e - e[k-m])
+    u[0] = -(kp + ki + kdw)
+    u[3] = ki
+    u[3 + m] = -kdw
+    a[:3, :3] = ad
+    a[:3, :] += np.outer(bd, u)
+    a[3, 3] = 1.0
+    a[3, 0] = -1.0
+    a[4, 0] = -1.0
+    for q in range(5, 4 + m):
+        a[q, q - 1] = 1.0
+    return np.linalg.eigvals(a)
+
+
+@lru_cache(maxsize=64)
+def _discrete_design(ke, kt, r, l, j, cpr, ti, T) -> tuple[float, float]:
+    best = (0.0, 0.0)
+    for kv in np.geomspace(1e-5, SPEED_NOISE_V * T, 40):
+        for kp in np.geomspace(1e-5, 1.0, 60):
+            if kp <= best[0]:
+                continue
+            z = _poles(ke, kt, r, l, j, cpr, T, kp, kp * T / ti, kv / T, 1)
+            if np.max(np.abs(z)) >= 1.0:
+                break                               # stiffer kp only gets worse
+            z = z[np.abs(z) > 0.5]
+            s = np.log(z.astype(complex)) / T
+            zeta = np.min(-s.real / np.maximum(np.abs(s), 1e-300))
+            if zeta >= 0.5:
+                best = (float(kp), float(kv))
+    return best
 
 
 # -- the kernel ------------------------------------------------------------------------------
@@ -312,16 +430,26 @@ class Trajectory:
     def peak_current(self) -> float:
         return float(np.max(np.abs(self.i)))
 
-    def stop_time(self, tol_counts: float = 1.0, v_tol: float = 5.0) -> float:
-        """First time after which the carriage stays within tol_counts of the target and
-        slower than v_tol counts/s (np.nan if it never settles within the run)."""
-        bad = (np.abs(self.x - self.target) > tol_counts) | (np.abs(self.v) > v_tol)
+    def stop_time(self, tol_counts: float = 1.0, v_tol: float | None = None) -> float:
+        """First time after which the carriage stays within tol_counts of the target (and,
+        if v_tol is given, slower than v_tol counts/s) to the end of the run; np.nan if it
+        never settles within the run.  At rest the loop may hunt across one encoder edge
+        (a fraction of a count at a few counts/s): that counts as settled."""
+        bad = np.abs(self.x - self.target) > tol_counts
+        if v_tol is not None:
+            bad |= np.abs(self.v) > v_tol
         idx = np.flatnonzero(bad)
         if idx.size == 0:
             return float(self.t[0])
         if idx[-1] == self.t.size - 1:
             return math.nan
         return float(self.t[idx[-1] + 1])
+
+    @property
+    def settle_time(self) -> float:
+        """stop_time() minus the reference's duration (s; negative: settled before the
+        reference ended)."""
+        return self.stop_time() - self.move_duration
 
     def crossing_times(self, positions: np.ndarray, forward: bool | None = None) -> np.ndarray:
         """Time at which the encoder first reaches each position moving in the line's direction

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .profile import COLORS, Profile, ProfileError
 
@@ -159,40 +160,55 @@ class PassPlanner:
         hi = min(self.height, top + self.s0 + self.n * self.advance)
         if hi <= lo:
             return None
-        rows = np.arange(lo, hi)
-        window = self._buf[lo - self._base:hi - self._base]
-        assign = self.assignment(rows)
-        j_of_row = p - rows // self.advance                           # (rows,)
-        mine = window.astype(bool) & (assign == j_of_row[:, None, None])   # dots of this pass
-        if not mine.any():
-            return None
-        cols_any = np.flatnonzero(mine.any(axis=(0, 2)))
-        xmin, xmax = int(cols_any[0]), int(cols_any[-1])
         heads = self.profile.heads
-        t_lo = min(xmin - c for c in self._head_cols)
-        t_hi = max(xmax - c for c in self._head_cols)
-        fires = t_hi - t_lo + 1
-        words = np.zeros((len(heads), fires, 8), np.uint16)
+        cols = np.array(self._head_cols, np.int64)
+        spread_lo = -int(cols.max())                  # trigger column of image column 0, farthest head
+        fires_all = self.width + int(cols.max() - cols.min())
+        words = np.zeros((len(heads), fires_all, 8), np.uint16)
         dots = np.zeros(4, np.int64)
-        for h in heads:
-            slots = self._head_slots[h.index]
-            r = top + slots
-            live = (self._slot_table[h.channel, np.clip(slots, 0, self._slot_table.shape[1] - 1), 0]
-                    == h.index) & (slots >= self.s0) & (slots < self.s0 + self.n * self.advance) \
-                & (r >= lo) & (r < hi)
-            nz = np.flatnonzero(live)
-            if nz.size == 0:
-                continue
-            bits = np.zeros((fires, self.profile.nozzles), np.uint8)
-            t0 = xmin - self._head_cols[h.index] - t_lo
-            seg = mine[r[nz] - lo, xmin:xmax + 1, h.channel]          # (len(nz), span)
-            bits[t0:t0 + seg.shape[1], nz] = seg.T
-            dots[h.channel] += int(seg.sum())
-            words[h.index] = np.packbits(bits, axis=1, bitorder="little").view("<u2")
+        _pack_pass(self._buf, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
+                   self._remap, self._slot_table, np.array([h.channel for h in heads]),
+                   np.array([h.y_rows for h in heads]), cols, self.profile.heads_per_color,
+                   spread_lo, words, dots)
+        used = np.flatnonzero(words.any(axis=(0, 2)))
+        if used.size == 0:
+            return None
+        t0, t1 = int(used[0]), int(used[-1]) + 1
+        words = words[:, t0:t1]
         direction = (self._printed % 2) if self.bidir else 0
         self._printed += 1
-        first = t_lo
+        first = spread_lo + t0
         if direction == 1:
             words = words[:, ::-1]
             first += self._bidir_offset
         return PassData(p, direction, top, first, np.ascontiguousarray(words), dots)
+
+
+@njit(cache=True, nogil=True)
+def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, remap, slot_table, head_channel,
+               head_y, head_col, hpc, spread_lo, words, dots):
+    """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
+    prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
+    pass index j = p - r // advance must equal the (dead-nozzle remapped) checker mask."""
+    width = buf.shape[1]
+    for h in range(head_channel.shape[0]):
+        ch = head_channel[h]
+        for z in range(128):
+            slot = head_y[h] + hpc * z
+            if slot < s0 or slot >= s0 + n * advance or slot >= slot_table.shape[1]:
+                continue
+            if slot_table[ch, slot, 0] != h:          # dead-end or dead nozzle
+                continue
+            r = top + slot
+            if r < lo or r >= hi:
+                continue
+            j = p - r // advance
+            rho = r % advance
+            row = r - base
+            word = z >> 4
+            bit = np.uint16(1 << (z & 15))
+            t_off = -head_col[h] - spread_lo
+            for x in range(width):
+                if buf[row, x, ch] and remap[ch, rho, (x + r) % n] == j:
+                    words[h, x + t_off, word] |= bit
+                    dots[ch] += 1

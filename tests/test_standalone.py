@@ -35,8 +35,10 @@ def test_print_through_standalone_emulator(tmp_path, serial):
         r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", str(src),
                             "--device", spec, "--passes", "2", "--bidir"],
                            capture_output=True, text=True, timeout=120)
-        assert r.returncode == 0, r.stderr
+        assert r.returncode == 0, r.stderr + "\n--- emulator ---\n" + (
+            proc.terminate() or proc.communicate(timeout=10)[1])
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        out, err = proc.communicate(timeout=10)
+    assert "Traceback" not in err, err
     assert np.array_equal(read_planes(tmp_path / "media-1.tif"), planes)
