@@ -217,7 +217,7 @@ class LineRun:
             cols = self.columns[idx]
             heads = [h for h in range(pr.n_heads) if mask >> h & 1]
             for part, h in enumerate(heads):
-                pr.land_drops(h, cols, P.words_to_nozzles(words[part]), self.forward)
+                pr.land_drops(h, cols, words[part], self.forward)
 
     def _end(self, fired: int, fault: P.Fault, head: int = 0xFF) -> None:
         pr = self.printer

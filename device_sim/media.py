@@ -9,8 +9,34 @@ the heads: memory is bounded by the swath, not by the job's length.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..rip.planes import PlanesWriter
+
+
+@njit(cache=True, nogil=True)
+def _land_words(win, base, height, width, words, cols, nozzle_rows, channel):
+    """Scatter the drops of packed fire words: bit z of fire f lands at
+    (nozzle_rows[z], cols[f]).  Returns (landed, stray, late)."""
+    landed = stray = late = 0
+    nwin = win.shape[0]
+    for f in range(words.shape[0]):
+        c = cols[f]
+        for w in range(8):
+            v = words[f, w]
+            if v == 0:
+                continue
+            for b in range(16):
+                if v & (1 << b):
+                    r = nozzle_rows[w * 16 + b]
+                    if r < 0 or r >= height or c < 0 or c >= width:
+                        stray += 1
+                    elif r < base:
+                        late += 1
+                    elif r - base < nwin:
+                        win[r - base, c, channel] += 1
+                        landed += 1
+    return landed, stray, late
 
 
 class Media:
@@ -27,26 +53,21 @@ class Media:
         self.late = 0                        # drops on rows already written out (paper went back)
         self.closed = False
 
-    def land(self, channel: int, rows: np.ndarray, cols: np.ndarray) -> None:
-        """Drops of one colour at image rows/cols, equal-length arrays.  One call holds one
-        head's fires of one block, so no (row, col) repeats inside a call and a buffered
-        fancy-index increment counts every drop."""
-        if rows.size == 0:
+    def land_words(self, channel: int, words: np.ndarray, cols: np.ndarray,
+                   nozzle_rows: np.ndarray) -> None:
+        """Drops of one head: words (fires, 8) uint16, the media column of each fire, and
+        the media row of each of the 128 nozzles (docs/protocol.md 4.3 bit order)."""
+        if words.size == 0:
             return
-        inside = (rows >= 0) & (rows < self.height) & (cols >= 0) & (cols < self.width)
-        self.stray += int(rows.size - np.count_nonzero(inside))
-        rows, cols = rows[inside], cols[inside]
-        late = rows < self._base
-        if late.any():
-            self.late += int(np.count_nonzero(late))
-            rows, cols = rows[~late], cols[~late]
-        if rows.size == 0:
-            return
-        top = int(rows.max())
+        top = int(nozzle_rows.max())
         if top >= self._base + self._win.shape[0]:
             self.flush_below(top - self._win.shape[0] + 1)
-        self._win[rows - self._base, cols, channel] += 1
-        self.drops[channel] += rows.size
+        landed, stray, late = _land_words(self._win, self._base, self.height, self.width,
+                                          np.ascontiguousarray(words), cols.astype(np.int64),
+                                          nozzle_rows.astype(np.int64), channel)
+        self.drops[channel] += landed
+        self.stray += stray
+        self.late += late
 
     def flush_below(self, row: int) -> None:
         """Rows < row can receive no more drops: write them out."""

@@ -431,25 +431,25 @@ class Printer:
             paper_nm = (self.paper_steps - self.job["paper0"]) * self.profile.feed_um_per_step * 1000
             self.media.flush_below(int(math.floor(paper_nm / self.job["row_nm"])) - self.job["y0"])
 
-    def land_drops(self, head: int, columns: np.ndarray, bits: np.ndarray, forward: bool) -> None:
-        """Drops of one head for consecutive fires at these trigger columns."""
+    def land_drops(self, head: int, columns: np.ndarray, words: np.ndarray, forward: bool) -> None:
+        """Drops of one head for fires at these trigger columns: words (fires, 8)."""
         prof, job = self.profile, self.job
         hd = self.heads[head]
         hd.fires += columns.size
         if hd.dead:
-            bits = bits.copy()
-            bits[:, sorted(hd.dead)] = 0
-        fi, nz = np.nonzero(bits)
+            words = words.copy()
+            for z in hd.dead:                      # a dead nozzle never drops
+                words[:, z >> 4] &= ~np.uint16(1 << (z & 15))
         if job is None or self.media is None:
-            if fi.size:
-                self.log("drops_without_job", head=head, drops=int(fi.size))
+            n = int(np.unpackbits(words.view(np.uint8)).sum())
+            if n:
+                self.log("drops_without_job", head=head, drops=n)
             return
         geo = prof.heads[head]
         k = job["k"]
         shift = 0 if forward else -prof.bidir_offset_columns.get(job["dpi"], 0) * k
-        x = columns[fi] * k + geo.x_counts + shift - job["x0"]
-        cols = x // k
+        cols = (columns * k + geo.x_counts + shift - job["x0"]) // k
         paper_nm = (self.paper_steps - job["paper0"]) * prof.feed_um_per_step * 1000
-        slot = geo.y_rows + prof.heads_per_color * nz
+        slot = geo.y_rows + prof.heads_per_color * np.arange(prof.nozzles)
         rows = np.rint((paper_nm + slot * job["row_nm"]) / job["row_nm"]).astype(np.int64) - job["y0"]
-        self.media.land(geo.channel, rows, cols)
+        self.media.land_words(geo.channel, words, cols, rows)

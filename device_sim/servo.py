@@ -478,6 +478,8 @@ def simulate_move(params: ServoParams, start_counts: float, end_counts: float, v
     """Run one carriage move through the DSP loop and the plant; the run lasts the reference's
     duration plus settle_s."""
     p = params
+    if start_counts != end_counts and (v_counts_s <= 0 or a_counts_s2 <= 0):
+        raise ValueError("a move needs a positive speed and acceleration")
     move = Trapezoid(float(start_counts), float(end_counts), float(v_counts_s), float(a_counts_s2))
     T = float(p.period_s)
     n_sub = max(1, int(math.ceil(T / p.max_dt_s - 1e-9)))

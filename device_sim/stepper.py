@@ -373,9 +373,9 @@ def sigmoid_segments(steps: int, vmax: float, acc: float,
     steps = int(steps)
     if steps <= 0:
         return [], np.zeros(0), np.zeros(0)
-    scale = 1.0
-    while True:
-        t, v = sigmoid_table(vmax * scale, acc, v_start, steps)
+    scale_v = scale_a = 1.0
+    for _ in range(200):
+        t, v = sigmoid_table(vmax * scale_v, acc * scale_a, v_start, steps)
         vi = np.round(v).astype(np.int64)
         d = np.concatenate(([0.0], np.cumsum(np.diff(t) * (v[1:] + v[:-1]) / 2)))
         bnd = np.round(d).astype(np.int64)
@@ -392,9 +392,13 @@ def sigmoid_segments(steps: int, vmax: float, acc: float,
             up.append(CamMov(dist, va, vb, a))
             j0 = j
         ramp = sum(s.dist for s in up)
-        if 2 * ramp <= steps:
+        worst = max((s.acc for s in up), default=0)
+        if 2 * ramp > steps:
+            scale_v *= 0.99                 # rounding pushed the ramps past the move
+        elif worst > acc:
+            scale_a *= 0.995 * acc / worst  # whole-pulse distances steepened a segment
+        else:
             break
-        scale *= 0.99                       # rounding pushed the ramps past the move
     if not up or up[-1].v1 <= up[0].v0:
         vs = int(round(min(v_start, vmax)))
         return [CamMov(steps, vs, vs, 0)], t, v
@@ -444,17 +448,25 @@ class FeedResult:
 
 def feed_move(steps: int, profile: str = "trapezoid", max_steps_s: float = 4000.0,
               accel_steps_s2: float = 40000.0, v_start_steps_s: float = V_START_STEPS_S,
-              half_step: bool = True, start_state: int = 1) -> FeedResult:
+              half_step: bool = True, start_state: int = 1,
+              correct_clock: bool = True) -> FeedResult:
     """One paper feed: plan the profile, run it through the cam module, sequence the L297.
-    steps > 0 feeds forward (CW), < 0 backward (CCW).  profile: "trapezoid" or "sigmoid"."""
+    steps > 0 feeds forward (CW), < 0 backward (CCW).  profile: "trapezoid" or "sigmoid".
+
+    correct_clock: the DSP multiplies speeds by 1.00663 and accelerations by 1.00663^2
+    before writing them (seed 003's suggested correction factor for the 50 MHz / 6 iteration
+    clock), so the feed runs at the asked speeds; False writes them as they are."""
     steps = int(steps)
     n = abs(steps)
     cw = steps >= 0
     table_t = table_v = np.zeros(0)
+    k = IDEAL_ITERATION_HZ / (DDA_CLOCK_HZ / DDA_STATES) if correct_clock else 1.0
+    vmax, acc, vs = max_steps_s * k, accel_steps_s2 * k * k, v_start_steps_s * k
     if profile == "trapezoid":
-        segs = trapezoid_segments(n, max_steps_s, accel_steps_s2, v_start_steps_s)
+        segs = trapezoid_segments(n, vmax, acc, vs)
     elif profile in ("sigmoid", "s-curve", "scurve"):
-        segs, table_t, table_v = sigmoid_segments(n, max_steps_s, accel_steps_s2, v_start_steps_s)
+        segs, table_t, table_v = sigmoid_segments(n, vmax, acc, vs)
+        table_t, table_v = table_t * k, table_v / k       # the table in real time and speed
         profile = "sigmoid"
     else:
         raise ValueError(f"unknown feed profile {profile!r} (trapezoid or sigmoid)")
