@@ -28,6 +28,35 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", metavar="TOML", help="printer profile (default: resources/printers/default.toml)")
 
 
+def _emulator_outputs(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vcd", metavar="FILE.vcd", help="emulator: waveform of the head interface "
+                   "and encoder for --vcd-window (GTKWave)")
+    p.add_argument("--vcd-window", default="0:0:0:8", metavar="PASS:HEAD:FIRST:COUNT",
+                   help="which fires go into the VCD (head index 0-7; default 0:0:0:8)")
+    p.add_argument("--latched-out", metavar="FILE.npz",
+                   help="emulator: the 128-bit words every head latched, per pass")
+
+
+def _emulator_options(args) -> dict:
+    opts = {}
+    if getattr(args, "vcd", None):
+        try:
+            window = tuple(int(v) for v in args.vcd_window.split(":"))
+            assert len(window) == 4
+        except (ValueError, AssertionError):
+            raise ValueError(f"--vcd-window {args.vcd_window!r}: expected PASS:HEAD:FIRST:COUNT") from None
+        opts.update(vcd_path=args.vcd, vcd_window=window)
+    if getattr(args, "latched_out", None):
+        opts["record_latched"] = True
+    return opts
+
+
+def _save_latched(printer, path: str) -> None:
+    np_arrays = {f"pass{p}": printer.latched_words(p) for p in sorted(printer.latched)}
+    import numpy as np
+    np.savez_compressed(path, **np_arrays)
+
+
 def _settings(args):
     from ..rip.pipeline import RipSettings
     return RipSettings(dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
@@ -97,8 +126,8 @@ def cmd_print(args) -> int:
         return EXIT_USAGE
     media = {}
     try:
-        dev = open_device(args.device, profile, faults,
-                          media_path=lambda job: media.get(job), event_log=args.event_log)
+        dev = open_device(args.device, profile, faults, media_path=lambda job: media.get(job),
+                          event_log=args.event_log, **_emulator_options(args))
     except (LinkError, ValueError, OSError) as exc:
         print(f"wideprint print: {exc}", file=sys.stderr)
         return EXIT_DEVICE
@@ -137,6 +166,8 @@ def cmd_print(args) -> int:
     finally:
         if dev.emulator is not None:
             dev.emulator.close()
+            if args.latched_out:
+                _save_latched(dev.emulator, args.latched_out)
         dev.close()
     if args.report:
         Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
@@ -166,7 +197,7 @@ def cmd_test_print(args) -> int:
         job.write_planes(args.planes_out)
     try:
         dev = open_device(args.device, profile, faults, media_path=args.media_out,
-                          event_log=args.event_log)
+                          event_log=args.event_log, **_emulator_options(args))
     except (LinkError, ValueError, OSError) as exc:
         print(f"wideprint test-print: {exc}", file=sys.stderr)
         return EXIT_DEVICE
@@ -184,6 +215,8 @@ def cmd_test_print(args) -> int:
     finally:
         if dev.emulator is not None:
             dev.emulator.close()
+            if args.latched_out:
+                _save_latched(dev.emulator, args.latched_out)
         dev.close()
 
 
@@ -198,9 +231,14 @@ def cmd_emulator(args) -> int:
         print(f"wideprint emulator: {exc}", file=sys.stderr)
         return EXIT_USAGE
     media = args.media_out
+    try:
+        options = _emulator_options(args)
+    except ValueError as exc:
+        print(f"wideprint emulator: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     printer = Printer(profile, faults,
                       media_path=(lambda job: media.format(job=job) if "{job}" in media else media)
-                      if media else None, event_log=args.event_log)
+                      if media else None, event_log=args.event_log, **options)
     server = EmulatorServer(printer, host="127.0.0.1", data_port=args.data_port,
                             serial_tcp_port=args.serial_port)
     print(f"device: {server.device_spec}", flush=True)
@@ -233,6 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="JSON", help="write the job reports")
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
+    _emulator_outputs(p)
     _rip_options(p)
     p.set_defaults(func=cmd_print)
 
@@ -257,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--inject", action="append", metavar="KIND=VALUE")
     p.add_argument("--event-log", metavar="JSONL")
     p.add_argument("--profile", metavar="TOML")
+    _emulator_outputs(p)
     p.set_defaults(func=cmd_test_print)
 
     p = sub.add_parser("emulator", help="run the printer emulator on a pty and TCP")
@@ -267,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--inject", action="append", metavar="KIND=VALUE")
     p.add_argument("--event-log", metavar="JSONL")
     p.add_argument("--profile", metavar="TOML")
+    _emulator_outputs(p)
     p.set_defaults(func=cmd_emulator)
     return ap
 

@@ -17,11 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..driver import protocol as P
-from .motion import Trapezoid, ramp_counts
+from .motion import ServoMove, ramp_counts
 
 
 class LineRun:
-    def __init__(self, printer, move: Trapezoid, t_start: float, speed: float, accel: float):
+    def __init__(self, printer, move: ServoMove, t_start: float, speed: float, accel: float):
         fpga = printer.fpga
         self.printer = printer
         self.pass_id = fpga.pass_id
@@ -47,7 +47,7 @@ class LineRun:
         self._pending_fires = 0
         self._plan_stops()
 
-    def _segment(self, i0: int, move: Trapezoid, t_start: float) -> None:
+    def _segment(self, i0: int, move: ServoMove, t_start: float) -> None:
         """Fires i0.. happen on this move."""
         self.move, self.t_seg = move, t_start
         self.t_fire[i0:] = t_start + move.time_at(self.columns[i0:] * self.k)
@@ -162,7 +162,7 @@ class LineRun:
         ramp = ramp_counts(self.speed, self.accel, self.k)
         start = float(self.columns[i] * self.k - sign * ramp)
         pr.move_carriage_to(start)
-        move = Trapezoid(start, self.end, self.speed, self.accel)
+        move = ServoMove(pr.servo, start, self.end, self.speed, self.accel)
         self._segment(i, move, pr.time)
         self.paused_at = None
         pr.log("resumed", pass_id=self.pass_id, fire=int(i), column=int(self.columns[i]))
@@ -218,6 +218,32 @@ class LineRun:
             heads = [h for h in range(pr.n_heads) if mask >> h & 1]
             for part, h in enumerate(heads):
                 pr.land_drops(h, cols, words[part], self.forward)
+            if pr.record_latched and len(heads) == pr.n_heads:
+                pr.latched.setdefault(self.pass_id, []).append((int(idx[0]), words))
+            if pr.vcd is not None:
+                self._waveform(idx, words, heads)
+
+    def _waveform(self, idx: np.ndarray, words: np.ndarray, heads: list[int]) -> None:
+        """Head-interface and encoder signals for the fires of the VCD window."""
+        from .vcd import add_encoder, add_fire
+        pr = self.printer
+        pass_id, head, first, count = pr.vcd_window
+        if pass_id != self.pass_id or head not in heads:
+            return
+        sel = np.flatnonzero((idx >= first) & (idx < first + count))
+        if sel.size == 0:
+            return
+        period = int(1e9 / pr.profile.max_fire_hz)
+        part = heads.index(head)
+        name = pr.profile.heads[head].name
+        for i in sel:
+            bits = P.words_to_nozzles(words[part, i])
+            add_fire(pr.vcd, name, int(self.t_fire[idx[i]] * 1e9), bits, self.forward, period)
+        c0, c1 = int(self.columns[idx[sel[0]]]) * self.k, int(self.columns[idx[sel[-1]]]) * self.k
+        step = 1 if c1 >= c0 else -1
+        counts = np.arange(c0, c1 + step, step)
+        times = self.t_seg + self.move.time_at(counts)
+        add_encoder(pr.vcd, counts, (times * 1e9).astype(np.int64))
 
     def _end(self, fired: int, fault: P.Fault, head: int = 0xFF) -> None:
         pr = self.printer
@@ -226,7 +252,7 @@ class LineRun:
         self.fault = fault
         pr.fpga.fired = fired
         if fault == P.Fault.NONE:
-            pr.carriage_stop(self.move.end, self.t_seg + self.move.duration)
+            pr.carriage_stop(self.move.final, self.t_seg + self.move.duration)
         else:
             t = self.t_fire[fired] if fired < self.n else self.t_seg + self.move.duration
             pos = self.move.position_at(t - self.t_seg)

@@ -26,7 +26,9 @@ from .fpga import Fpga
 from .head import Head
 from .line import LineRun
 from .media import Media
-from .motion import Trapezoid, ramp_counts
+from .motion import ServoMove, Trapezoid, ramp_counts
+from .servo import ServoParams
+from .stepper import feed_move
 
 PCI_BYTES_S = 60e6           # effective PLX9054 DMA rate (33 MHz, 32 bit, with overhead)
 HOME_SPEED_MM_S = 50.0
@@ -37,7 +39,9 @@ SHEET_LEFT_MM = 320.0        # the emulator's sheet: left edge this far from the
 class Printer:
     def __init__(self, profile: Profile | None = None, faults: Faults | None = None,
                  media_path: str | Callable[[int], str] | None = None,
-                 event_log: str | Path | None = None):
+                 event_log: str | Path | None = None, vcd_path: str | None = None,
+                 vcd_window: tuple[int, int, int, int] = (0, 0, 0, 8),
+                 record_latched: bool = False):
         self.profile = profile or load_profile()
         self.faults = faults or Faults()
         prof = self.profile
@@ -49,6 +53,7 @@ class Printer:
         for name, nozzle in self.faults.dead_nozzle:
             self.heads[self.head_index(name)].dead.add(nozzle)
         self.dsp = Dsp(self)
+        self.servo = ServoParams.from_profile(self.profile)
         self.rng = random.Random(self.faults.seed)
         self.time = 0.0
         self.baud = P.DEFAULT_BAUD
@@ -62,6 +67,8 @@ class Printer:
         self.line_done = False
         self.feed_done = False
         self.paper_steps = 0
+        self.feed_state = 1                  # L297 translator state (1..8)
+        self.vcd_feed = True
         self.paper_measured = False
         width = self.faults.paper_width_mm or float(prof.raw["paper"]["default_width_mm"])
         left = SHEET_LEFT_MM / 25.4 * prof.counts_per_inch
@@ -85,6 +92,15 @@ class Printer:
         self.jobs_done: dict[int, dict] = {}
         self.config_traces = []
         self._log_file = open(event_log, "w") if event_log else None
+        # VCD of the head interface for (pass, head, first fire, fires); see vcd.py
+        self.vcd_path, self.vcd_window = vcd_path, vcd_window
+        self.vcd = None
+        if vcd_path:
+            from .vcd import Vcd
+            self.vcd = Vcd()
+        # the 128-bit words each head latched, per pass, in firing order (tests, --latched-out)
+        self.record_latched = record_latched
+        self.latched: dict[int, list] = {}
         self.events: deque = deque(maxlen=200_000)
 
     # -- bookkeeping ------------------------------------------------------------------------
@@ -109,6 +125,9 @@ class Printer:
     def close(self) -> None:
         if self.media:
             self.media.close()
+        if self.vcd is not None and self.vcd_path:
+            self.vcd.write(self.vcd_path)
+            self.vcd = None
         if self._log_file:
             self._log_file.close()
             self._log_file = None
@@ -316,8 +335,16 @@ class Printer:
         made = steps
         if self.paper_left_steps is not None and steps > self.paper_left_steps:
             made = self.paper_left_steps
-        move = Trapezoid(0, abs(made), vmax, acc)
-        self.time += move.duration
+        run = feed_move(made, "sigmoid" if profile == 1 else "trapezoid", vmax, acc,
+                        start_state=self.feed_state) if made else None
+        if run is not None:
+            if self.vcd is not None and self.vcd_feed:
+                from .vcd import add_stepper
+                add_stepper(self.vcd, ((self.time + run.step_times) * 1e9).astype(np.int64),
+                            run.phases[:, :4])
+                self.vcd_feed = False           # the first feed is enough to look at
+            self.feed_state = run.end_state
+            self.time += run.duration
         self.paper_steps += made
         if self.paper_left_steps is not None:
             self.paper_left_steps -= made
@@ -366,7 +393,8 @@ class Printer:
             return P.Result.HEADS_NOT_CONFIGURED
         start, end = (cfg["lo"], cfg["hi"]) if cfg["direction"] == 0 else (cfg["hi"], cfg["lo"])
         self._move_to(float(start))
-        move = Trapezoid(start - self.count_offset, end - self.count_offset, cfg["speed"], cfg["accel"])
+        move = ServoMove(self.servo, start - self.count_offset, end - self.count_offset,
+                         cfg["speed"], cfg["accel"])
         self.fpga.firing = True
         self.line_done = False
         self.motion = P.Motion.PRINTING
@@ -397,9 +425,19 @@ class Printer:
         for h in self.heads:
             trace = h.load_config(digits, t0)
         self.config_traces.append(trace)
+        if self.vcd is not None:
+            from .vcd import add_config_load
+            add_config_load(self.vcd, self.profile.heads[self.vcd_window[1]].name, trace.digits,
+                            trace.dstb_rise_ns, trace.data_nconfig_rise_ns)
         self.fpga.configured_mask = (1 << self.n_heads) - 1
         self.time = trace.data_nconfig_rise_ns / 1e9
         self.log("head_config", digits=len(digits), first=digits[:5])
+
+    def latched_words(self, pass_id: int) -> np.ndarray:
+        """(heads, fires, 8): what each head latched in a pass, in firing order."""
+        items = sorted(self.latched.get(pass_id, []), key=lambda it: it[0])
+        parts = [w for _, w in items]
+        return np.concatenate(parts, axis=1) if parts else np.zeros((self.n_heads, 0, 8), np.uint16)
 
     def job_begin(self, job: int, x0: int, width: int, height: int, dpi: int, row_nm: int,
                   y0: int) -> None:

@@ -363,12 +363,12 @@ def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kdw, m, vmax, ke, kt, r, l, j
 def trapezoid_reference(move: Trapezoid, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Position, speed and acceleration of the ideal trapezoid at times t (vectorised)."""
     t = np.clip(np.asarray(t, dtype=np.float64), 0.0, None)
-    s, vp, a, tr, T = move.sign, move.v_peak, move.a, move.t_ramp, move.duration
-    d = np.empty_like(t)
     v = np.zeros_like(t)
     acc = np.zeros_like(t)
     if move.distance == 0:
         return np.full_like(t, move.start), v, acc
+    s, vp, a, tr, T = move.sign, move.v_peak, move.a, move.t_ramp, move.duration
+    d = np.empty_like(t)
     up = t <= tr
     down = t >= T - tr
     cru = ~up & ~down

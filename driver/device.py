@@ -102,13 +102,16 @@ class Device:
 
 
 def open_device(spec: str, profile: Profile, faults=None, media_path=None,
-                event_log=None) -> Device:
+                event_log=None, **emulator_options) -> Device:
+    """emulator_options go to the in-process emulator (vcd_path, vcd_window,
+    record_latched)."""
     spec = spec.strip()
     timeout = float(profile.raw["link"]["response_timeout_s"])
     if spec == "emulator":
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer
-        printer = Printer(profile, faults, media_path=media_path, event_log=event_log)
+        printer = Printer(profile, faults, media_path=media_path, event_log=event_log,
+                          **emulator_options)
         serial_port, data = in_process(printer)
         return Device(CommandLink(serial_port, timeout), data, profile, emulator=printer)
     parts = dict(p.split("=", 1) for p in spec.split(",") if "=" in p)
