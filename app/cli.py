@@ -108,7 +108,7 @@ def _expand(files: list[str]) -> list[str]:
 def cmd_print(args) -> int:
     from ..device_sim.faults import Faults
     from ..driver.device import open_device
-    from ..driver.job import JobError, PrintJob
+    from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
     from ..rip.load import ImageError
     from ..rip.pipeline import RipJob
@@ -133,6 +133,20 @@ def cmd_print(args) -> int:
         return EXIT_DEVICE
     reports, failed = [], 0
     say = sys.stderr if args.json else sys.stdout     # --json keeps stdout machine-readable
+    current: dict = {}
+
+    def interrupt(signum, frame):
+        """First Ctrl-C: cancel (the line stops, the carriage parks); second: emergency stop."""
+        job = current.get("job")
+        if job is None:
+            raise KeyboardInterrupt
+        if job.control.cancelled.is_set():
+            print("\nemergency stop", file=sys.stderr)
+            job.control.estop()
+        else:
+            print("\ncancelling (Ctrl-C again for an emergency stop)", file=sys.stderr)
+            job.control.cancel()
+    signal.signal(signal.SIGINT, interrupt)
     try:
         for i, f in enumerate(files):
             media[i + 1] = _media_path(args.media_out, i, len(files))
@@ -144,6 +158,7 @@ def cmd_print(args) -> int:
                 print(f"{f}: FAILED: {exc}", file=sys.stderr)
                 continue
             job = PrintJob(dev, rip, job_id=i + 1)
+            current["job"] = job
             try:
                 rep = job.run().as_dict()
                 rep["media"] = media[i + 1]
@@ -157,6 +172,12 @@ def cmd_print(args) -> int:
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
+            except JobCancelled as exc:
+                failed += 1
+                rep = job.report.as_dict()
+                print(f"{f}: CANCELLED: {exc}", file=sys.stderr)
+                reports.append(rep)
+                break
             except (JobError, ImageError) as exc:
                 failed += 1
                 rep = job.report.as_dict()

@@ -118,7 +118,7 @@ class Dsp:
             return ok
         if op == P.Op.STOP:
             need_empty()
-            pr.fpga.write_reg(P.REG_WE_EN, 0)
+            pr.stop_motion()
             return ok
         if op == P.Op.SET_BAUD:
             (baud,) = struct.unpack("<I", payload)

@@ -403,6 +403,19 @@ class Printer:
         self.pump()
         return P.Result.OK
 
+    def stop_motion(self) -> None:
+        """STOP: heads off, a running line ends where it is (the carriage brakes)."""
+        self.fpga.write_reg(P.REG_WE_EN, 0)
+        line = self.line
+        if line is not None and not line.done:
+            line.land_pending()
+            line.done = True
+            self.fpga.firing = False
+            self.motion = P.Motion.IDLE
+            self.log("line", pass_id=line.pass_id, forward=line.forward,
+                     first_column=int(line.first), fires=int(line.n), fired=int(self.fpga.fired),
+                     fault="STOPPED", pauses=line.pauses, min_fifo_words=None)
+
     def carriage_park_at(self, counter_position: float, t: float) -> None:
         """The carriage braked to a stop inside a line (starved); the line stays active."""
         self.position = counter_position + self.count_offset

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -23,6 +24,62 @@ log = logging.getLogger("wideprint.job")
 
 HEAD_MASK_ALL = 0xFF
 MAX_RECOVERIES = 5          # reconnections per pass before the job fails
+
+
+class JobCancelled(RuntimeError):
+    """The operator cancelled the job."""
+
+
+class JobControl:
+    """Operator controls, safe to call from any thread (GUI, server, signal handler).
+    Pause and cancel act at pass boundaries (cancel also stops a running line);
+    emergency stop acts at once."""
+
+    def __init__(self) -> None:
+        self._run = threading.Event()
+        self._run.set()
+        self.cancelled = threading.Event()
+        self.estop_requested = threading.Event()
+
+    def pause(self) -> None:
+        self._run.clear()
+
+    def resume(self) -> None:
+        self._run.set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._run.is_set()
+
+    def cancel(self) -> None:
+        self.cancelled.set()
+        self._run.set()
+
+    def estop(self) -> None:
+        self.estop_requested.set()
+        self.cancel()
+
+    def wait_while_paused(self) -> None:
+        while not self._run.wait(0.1):
+            pass
+
+
+@dataclass
+class Telemetry:
+    """One snapshot of a job and its printer, for the GUI, the server and the CLI."""
+    state: str = "queued"            # queued, connecting, printing, paused, done, failed, cancelled
+    detail: str = ""
+    pass_index: int | None = None
+    passes_total: int = 0
+    passes_printed: int = 0
+    carriage_counts: int = 0
+    paper_steps: int = 0
+    fires_done: int = 0
+    fifo_words: tuple = ()
+    head_temps_c: tuple = ()
+    fault: str = ""
+    retries: int = 0
+    recoveries: int = 0
 
 
 class JobError(RuntimeError):
@@ -82,12 +139,41 @@ class PrintJob:
         self.report = JobReport(file=rip.path)
         self.on_event = on_event or (lambda kind, **kw: None)
         self.poll_interval = 0.0 if device.emulator is not None else 0.01
+        self.control = JobControl()
+        self.telemetry = Telemetry()
+        self._state("queued")
+
+    # -- telemetry --------------------------------------------------------------------------
+    def _state(self, state: str, detail: str = "") -> None:
+        self.telemetry.state, self.telemetry.detail = state, detail
+        log.info("job %s: %s %s", self.job_id, state, detail)
+        self.on_event("state", state=state, detail=detail)
+
+    def _seen(self, st: P.Status) -> P.Status:
+        """Every status the job reads updates the telemetry (no extra traffic)."""
+        t = self.telemetry
+        t.carriage_counts, t.paper_steps, t.fires_done = st.carriage, st.paper_steps, st.fires_done
+        t.fifo_words = st.fifo[:len(self.profile.heads)]
+        t.fault = "" if st.fault == P.Fault.NONE else fault_message(st, self.profile)
+        t.retries = self.dev.link.retries
+        self.on_event("status", telemetry=t)
+        return st
+
+    def _read_head_temps(self) -> None:
+        try:
+            raw = self.dev.link.command(P.Op.HEAD_STATUS)
+        except (LinkError, DeviceError):
+            return
+        size = struct.calcsize(P.HEAD_STATUS_FMT)
+        self.telemetry.head_temps_c = tuple(
+            struct.unpack_from(P.HEAD_STATUS_FMT, raw, i * size)[0] / 10
+            for i in range(len(raw) // size))
 
     # -- device steps ---------------------------------------------------------------------
     def _wait(self, done, what: str, timeout: float = 120.0) -> P.Status:
         deadline = time.monotonic() + timeout
         while True:
-            st = self.dev.link.status()
+            st = self._seen(self.dev.link.status())
             if st.fault != P.Fault.NONE:
                 raise JobError(f"{what}: {fault_message(st, self.profile)}", st.fault, st.fault_pass)
             if done(st):
@@ -104,16 +190,16 @@ class PrintJob:
         if st.fault != P.Fault.NONE:
             raise JobError(f"printer reports a fault: {fault_message(st, self.profile)}", st.fault)
         if not st.flags & P.FLAG_HEADS_CONFIGURED:
-            self.on_event("state", state="loading head configuration")
+            self._state("connecting", "loading head configuration")
             self.dev.load_head_config()
         if not st.flags & P.FLAG_ENABLED:
             link.command(P.Op.ENABLE, b"\x01")
         if not st.flags & P.FLAG_HOMED:
-            self.on_event("state", state="homing")
+            self._state("connecting", "homing")
             link.command(P.Op.HOME)
             self._wait(lambda s: s.flags & P.FLAG_HOMED and s.motion == P.Motion.IDLE, "homing")
         if not st.flags & P.FLAG_PAPER_MEASURED:
-            self.on_event("state", state="measuring paper")
+            self._state("connecting", "measuring paper")
             link.command(P.Op.MEASURE_PAPER)
             self._wait(lambda s: s.flags & P.FLAG_PAPER_MEASURED and s.motion == P.Motion.IDLE,
                        "measuring the paper")
@@ -241,7 +327,12 @@ class PrintJob:
         link, prof = self.dev.link, self.profile
         deadline = time.monotonic() + 60 + pd.fires / 1000
         while True:
-            st = link.status()
+            if self.control.estop_requested.is_set():
+                self._estop()
+            elif self.control.cancelled.is_set():
+                link.command(P.Op.STOP)
+                raise JobCancelled(f"cancelled during pass {pd.index}")
+            st = self._seen(link.status())
             if st.fault != P.Fault.NONE:
                 raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
             if streamer.error is not None:      # the device's own report (above) comes first
@@ -260,10 +351,13 @@ class PrintJob:
         rep.width_dots, rep.height_rows = rip.width, rip.height
         try:
             self.line_speed()
+            self._state("connecting")
             self._recovering(self.prepare, "connecting")
+            self._read_head_temps()
+            self._state("printing")
             x0 = self._recovering(self.place, "placing the job")
             planner = rip.planner()
-            rep.passes_total = planner.total_passes
+            rep.passes_total = self.telemetry.passes_total = planner.total_passes
             link = self.dev.link
             begin = struct.pack(P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height,
                                 rip.settings.dpi, prof.row_nm, planner.y0_rows)
@@ -271,12 +365,16 @@ class PrintJob:
             paper0 = self._recovering(lambda: link.status().paper_steps, "reading the paper position")
             top0 = planner.top_row(0)
             for pd in rip.passes(planner):
+                self._between_passes(pd.index)
+                self.telemetry.pass_index = pd.index
                 target = paper0 + prof.feed_steps_for_rows(pd.top_row - top0)
                 self._recovering(lambda: self.feed_to(target), f"feed before pass {pd.index}")
                 self.on_event("pass", index=pd.index, total=planner.total_passes,
                               direction=pd.direction, fires=pd.fires)
                 self.print_pass(pd, x0)
                 rep.passes_printed += 1
+                self.telemetry.passes_printed = rep.passes_printed
+                self._read_head_temps()
                 for c in range(4):
                     rep.drops[c] += int(pd.dots[c])
             # feed the last rows out past the heads, then park
@@ -288,13 +386,21 @@ class PrintJob:
             self._recovering(lambda: link.command(P.Op.PARK), "parking")
             rep.passes_skipped = rep.passes_total - rep.passes_printed
             rep.state = "done"
+            self._state("done")
+        except JobCancelled as exc:
+            rep.state, rep.message = "cancelled", str(exc)
+            self._safe_stop()
+            self._state("cancelled", str(exc))
+            raise
         except (JobError, LinkError, DeviceError, StreamError) as exc:
             rep.state = "failed"
             rep.message = str(exc)
             self._safe_stop()
+            self._state("failed", str(exc))
             raise JobError(str(exc), getattr(exc, "fault", 0), getattr(exc, "pass_id", None)) from exc
         finally:
             rep.retries = self.dev.link.retries
+            self.telemetry.recoveries = rep.recoveries
             rep.wall_s = time.monotonic() - t0
             pl = prof.drop_volume_pl
             rep.ink_ml = [round(d * pl * 1e-9, 6) for d in rep.drops]
@@ -302,6 +408,25 @@ class PrintJob:
             rep.area_m2 = (rip.width * k / prof.counts_per_inch * 0.0254) * \
                 (rip.height * prof.row_um * 1e-6)
         return rep
+
+    def _estop(self) -> None:
+        try:
+            self.dev.link.command(P.Op.ESTOP)
+        finally:
+            raise JobError("emergency stop by the operator", P.Fault.ESTOP)
+
+    def _between_passes(self, next_index: int) -> None:
+        c = self.control
+        if c.estop_requested.is_set():
+            self._estop()
+        if c.paused and not c.cancelled.is_set():
+            self._state("paused", f"before pass {next_index}")
+            c.wait_while_paused()
+            self._state("printing")
+        if c.estop_requested.is_set():
+            self._estop()
+        if c.cancelled.is_set():
+            raise JobCancelled(f"cancelled before pass {next_index}")
 
     def _safe_stop(self) -> None:
         """After a failure: heads off, carriage stopped; errors here are secondary."""

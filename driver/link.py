@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import struct
+import threading
 import time
 
 from . import protocol as P
@@ -41,6 +42,7 @@ class CommandLink:
         self.decoder = P.FrameDecoder()
         self.retries = 0          # retransmissions made (telemetry)
         self.frames = 0
+        self._lock = threading.RLock()   # one command at a time, from any thread (ESTOP)
         # an in-process device answers synchronously: no answer now means none is coming
         self.synchronous = port.__class__.__name__.startswith("InProcess")
 
@@ -49,6 +51,10 @@ class CommandLink:
         return nbytes * 10 / baud
 
     def handshake(self) -> None:
+        with self._lock:
+            self._handshake()
+
+    def _handshake(self) -> None:
         for _ in range(self.tries):
             self.port.reset_input_buffer()
             self.port.write(bytes((P.HANDSHAKE_REQUEST,)))
@@ -64,6 +70,10 @@ class CommandLink:
 
     def command(self, op: P.Op, payload: bytes = b"") -> bytes:
         """Send one command, return the response data after the result byte."""
+        with self._lock:
+            return self._command(op, payload)
+
+    def _command(self, op: P.Op, payload: bytes) -> bytes:
         frame = P.Frame(self.seq, P.Kind.COMMAND, op, payload).encode()
         seq = self.seq
         self.seq = (self.seq + 1) & 0xFF
