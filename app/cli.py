@@ -202,15 +202,14 @@ def cmd_test_print(args) -> int:
     from ..driver.device import open_device
     from ..driver.job import JobError, PrintJob
     from ..driver.link import LinkError
-    from ..rip.pipeline import RipSettings
-    from ..rip.testprints import PatternJob, make_pattern
+    from ..rip.testprints import PatternJob
     try:
         profile = _profile(args)
         faults = Faults.parse(args.inject)
         k = profile.k(args.dpi)
         width = int(round(args.width_mm / 25.4 * profile.counts_per_inch / k))
-        planes = make_pattern(args.pattern, profile, width, head=args.head, nozzle=args.nozzle)
-        job = PatternJob(args.pattern, planes, RipSettings(dpi=args.dpi, passes=1), profile)
+        job = PatternJob.for_pattern(args.pattern, profile, width, args.dpi, head=args.head,
+                                     nozzle=args.nozzle)
     except ValueError as exc:
         print(f"wideprint test-print: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -303,7 +302,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_rip)
 
     from ..rip.testprints import PATTERNS
-    p = sub.add_parser("test-print", help="print a test pattern (line, sawtooth, nozzle-check)")
+    p = sub.add_parser("test-print", help="print a test pattern (nozzle check, line, sawtooth, "
+                       "bidirectional and head alignment)")
     p.add_argument("pattern", choices=PATTERNS)
     p.add_argument("--device", default="emulator")
     p.add_argument("--media-out", metavar="MEDIA.tif")

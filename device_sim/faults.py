@@ -21,6 +21,8 @@ KINDS = {
     "fifo-words": "FIFO depth per head (words) instead of the profile's",
     "encoder-glitch-at": "an impossible A/B transition at this encoder count",
     "starve-guard": "0: a starved FIFO is the seed's underrun fault; 1: pause and resume the line",
+    "bidir-error": "reverse-pass drops land this many columns off (misaligned machine)",
+    "head-error": "HEAD:COUNTS: this head sits COUNTS encoder counts off its profile position",
     "seed": "random seed for the injected faults",
 }
 
@@ -41,6 +43,8 @@ class Faults:
     fifo_words: int | None = None
     encoder_glitch_at: int | None = None
     starve_guard: int | None = None
+    bidir_error: int = 0
+    head_error: list = field(default_factory=list)       # [(head name, counts)]
     seed: int = 1
 
     @classmethod
@@ -55,7 +59,7 @@ class Faults:
             if attr not in names:
                 raise ValueError(f"--inject {kind!r}: unknown fault; kinds: {', '.join(KINDS)}")
             try:
-                if attr in ("dead_nozzle", "overtemp"):
+                if attr in ("dead_nozzle", "overtemp", "head_error"):
                     head, num = value.split(":")
                     getattr(f, attr).append((head.strip(), int(num)))
                 elif attr == "host_jitter":
@@ -63,7 +67,7 @@ class Faults:
                         raise ValueError(value)
                     f.host_jitter = value
                 elif attr in ("data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
-                              "seed", "starve_guard"):
+                              "seed", "starve_guard", "bidir_error"):
                     setattr(f, attr, int(float(value)))
                 else:
                     setattr(f, attr, float(value))

@@ -498,7 +498,12 @@ class Printer:
             return
         geo = prof.heads[head]
         k = job["k"]
-        shift = 0 if forward else -prof.bidir_offset_columns.get(job["dpi"], 0) * k
+        # where the drops really land.  The emulated machine is perfectly built unless a
+        # misalignment is injected: reverse drops land `bidir_error` columns early, a head
+        # sits `head_error` counts off.  The profile's calibration (bidir offset, head x) is
+        # the RIP's business: a profile that matches the machine prints exactly.
+        shift = 0 if forward else -self.faults.bidir_error * k
+        shift += sum(c for name, c in self.faults.head_error if name == geo.name)
         cols = (columns * k + geo.x_counts + shift - job["x0"]) // k
         paper_nm = (self.paper_steps - job["paper0"]) * prof.feed_um_per_step * 1000
         slot = geo.y_rows + prof.heads_per_color * np.arange(prof.nozzles)

@@ -102,16 +102,18 @@ class Device:
 
 
 def open_device(spec: str, profile: Profile, faults=None, media_path=None,
-                event_log=None, **emulator_options) -> Device:
-    """emulator_options go to the in-process emulator (vcd_path, vcd_window,
+                event_log=None, machine_profile: Profile | None = None,
+                **emulator_options) -> Device:
+    """The in-process emulator is built from `machine_profile` (the machine as it really
+    is; default: the job's profile) and emulator_options (vcd_path, vcd_window,
     record_latched)."""
     spec = spec.strip()
     timeout = float(profile.raw["link"]["response_timeout_s"])
     if spec == "emulator":
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer
-        printer = Printer(profile, faults, media_path=media_path, event_log=event_log,
-                          **emulator_options)
+        printer = Printer(machine_profile or profile, faults, media_path=media_path,
+                          event_log=event_log, **emulator_options)
         serial_port, data = in_process(printer)
         return Device(CommandLink(serial_port, timeout), data, profile, emulator=printer)
     parts = dict(p.split("=", 1) for p in spec.split(",") if "=" in p)

@@ -8,6 +8,7 @@ columns at the dpi mode's pitch (encoder counts / k), rows at half the nozzle pi
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -219,3 +220,31 @@ def _validate(p: Profile) -> None:
     if p.feed_um_per_step > p.row_um / 2:
         raise ProfileError(f"{p.path}: a feed step ({p.feed_um_per_step:.1f} um) is coarser "
                            f"than half a row ({p.row_um / 2:.1f} um)")
+
+
+def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | None = None,
+                     head_x_counts: dict[str, int] | None = None) -> Profile:
+    """Write alignment results into a profile file, keeping its comments and layout, and
+    return the reloaded profile (which validates them)."""
+    path = Path(path)
+    text = path.read_text()
+    if bidir_offset_columns is not None:
+        line = "bidir_offset_columns = { " + ", ".join(
+            f"{int(k)} = {int(v)}" for k, v in sorted(bidir_offset_columns.items())) + " }"
+        text, n = re.subn(r"(?m)^bidir_offset_columns\s*=.*$", line, text)
+        if n != 1:
+            raise ProfileError(f"{path}: no bidir_offset_columns line to update")
+    for name, counts in (head_x_counts or {}).items():
+        pattern = r'(\{\s*name\s*=\s*"' + re.escape(name) + r'"[^}]*?x_counts\s*=\s*)(-?\d+)'
+        text, n = re.subn(pattern, lambda m: m.group(1) + str(int(counts)), text)
+        if n != 1:
+            raise ProfileError(f"{path}: no head {name!r} to update")
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text)
+    try:
+        prof = load_profile(tmp)
+    except ProfileError:
+        tmp.unlink()
+        raise
+    tmp.replace(path)
+    return load_profile(path)

@@ -9,6 +9,12 @@ printed through the same planner and driver as any image.
                 stays 0 as the XJ128 requires)
 - nozzle-check: every nozzle of every head prints a short dash, staggered in eight columns,
                 so a missing dash names a dead nozzle
+- bidir-align:  printed in two passes, forward then reverse: for each candidate offset
+                o = -R..R a block of vertical bars, drawn at x by the forward pass and at
+                x + o by the reverse pass; the block whose bars continue straight across
+                the pass boundary is the correction (docs/testprints.md)
+- head-align:   for every head, bars at x + o next to reference bars of head K1, for
+                o = -R..R; the straight block per head is that head's correction
 """
 
 from __future__ import annotations
@@ -24,7 +30,20 @@ from .planes import PlanesWriter
 from .profile import Profile, load_profile
 from .swath import PassData, PassPlanner
 
-PATTERNS = ("line", "sawtooth", "nozzle-check")
+PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
+ALIGN_RANGE = 4          # candidate offsets -4 .. +4 columns
+ALIGN_BLOCK = 48         # columns per candidate block
+ALIGN_PITCH = 8          # columns between bars
+
+
+def align_offsets() -> list[int]:
+    return list(range(-ALIGN_RANGE, ALIGN_RANGE + 1))
+
+
+def _bars(planes, rows, channel, x0, offset, width):
+    for x in range(x0 + 4, x0 + width - 4, ALIGN_PITCH):
+        if 0 <= x + offset < planes.shape[1]:
+            planes[rows, x + offset, channel] = 1
 
 
 def _slot_row(profile: Profile, head_name: str, nozzle: int, planner_s0: int) -> tuple[int, int]:
@@ -68,6 +87,32 @@ def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
                 x0 = (z % 8) * dash
                 planes[r, x0:x0 + dash - 1, h.channel] = 1
         return planes
+    if kind == "bidir-align":
+        # 1-pass bidirectional: pass 0 (forward) prints rows 0..rows-1, pass 1 (reverse) the next
+        blocks = align_offsets()
+        planes = np.zeros((2 * rows, len(blocks) * ALIGN_BLOCK, 4), np.uint8)
+        for b, o in enumerate(blocks):
+            x0 = b * ALIGN_BLOCK
+            _bars(planes, slice(rows // 2, rows), 3, x0, 0, ALIGN_BLOCK)        # forward, K
+            _bars(planes, slice(rows, rows + rows // 2), 3, x0, o, ALIGN_BLOCK)  # reverse, K
+        return planes
+    if kind == "head-align":
+        blocks = align_offsets()
+        names = [h.name for h in profile.heads]
+        planes = np.zeros((rows, len(blocks) * ALIGN_BLOCK, 4), np.uint8)
+        ref_row, ref_ch = _slot_row(profile, "K1", 20, s0)
+        band = max(1, (profile.nozzles - 30) // len(names))
+        for b, o in enumerate(blocks):
+            x0 = b * ALIGN_BLOCK
+            for i, name in enumerate(names):
+                z0 = 25 + i * band
+                for z in range(z0, z0 + band - 2):
+                    r, c = _slot_row(profile, name, z, s0)
+                    _bars(planes, r, c, x0, 0 if name == "K1" else o, ALIGN_BLOCK)
+            for z in range(5, 20):                                  # K1 reference bars
+                r, c = _slot_row(profile, "K1", z, s0)
+                _bars(planes, r, c, x0, 0, ALIGN_BLOCK)
+        return planes
     raise ValueError(f"test print must be one of {', '.join(PATTERNS)}")
 
 
@@ -78,6 +123,14 @@ class PatternJob:
     kind: str
     planes: np.ndarray
     settings: RipSettings = field(default_factory=lambda: RipSettings(passes=1))
+
+    @classmethod
+    def for_pattern(cls, kind: str, profile: Profile, width: int, dpi: int = 150,
+                    **kw) -> "PatternJob":
+        """The pattern with the pass settings it needs (bidir-align prints bidirectionally)."""
+        planes = make_pattern(kind, profile, width, **kw)
+        return cls(kind, planes, RipSettings(dpi=dpi, passes=1, bidir=kind == "bidir-align"),
+                   profile)
     profile: Profile = field(default_factory=load_profile)
 
     def __post_init__(self):

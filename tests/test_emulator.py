@@ -19,8 +19,8 @@ from wideprint.rip.planes import read_planes
 from wideprint.rip.testprints import PatternJob, make_pattern
 
 
-def run(job, profile, media, faults=None, **kw):
-    dev = open_device("emulator", profile, faults, media_path=str(media))
+def run(job, profile, media, faults=None, machine=None, **kw):
+    dev = open_device("emulator", profile, faults, media_path=str(media), machine_profile=machine)
     try:
         return PrintJob(dev, job, **kw).run(), dev.emulator
     finally:
@@ -202,4 +202,63 @@ def test_starved_line_pauses_and_resumes_with_every_dot_in_place(tmp_path, profi
     pauses = sum(e["pauses"] for e in emu.events if e["event"] == "line")
     assert pauses > 0
     assert any(e["event"] == "resumed" for e in emu.events)
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+
+
+# -- calibration: alignment prints find an injected misalignment; the profile fixes it -------
+def test_bidir_alignment_finds_and_fixes_the_offset(tmp_path, profile):
+    import shutil
+    from wideprint.rip.profile import DEFAULT_PROFILE, load_profile, save_calibration
+    from wideprint.rip.testprints import ALIGN_BLOCK, PatternJob, align_offsets
+    machine = Faults(bidir_error=2)
+    job = PatternJob.for_pattern("bidir-align", profile, 0)
+    run(job, profile, tmp_path / "a.tif", machine)
+    media = read_planes(tmp_path / "a.tif")[:, :, 3]
+    rows = job.height // 2
+    fwd, rev = media[:rows].any(axis=0), media[rows:].any(axis=0)
+    aligned = [o for b, o in enumerate(align_offsets())
+               if np.array_equal(fwd[b * ALIGN_BLOCK:(b + 1) * ALIGN_BLOCK],
+                                 rev[b * ALIGN_BLOCK:(b + 1) * ALIGN_BLOCK])]
+    assert aligned == [2]
+    copy = tmp_path / "p.toml"
+    shutil.copy(DEFAULT_PROFILE, copy)
+    fixed = save_calibration(copy, bidir_offset_columns={150: 2, 300: 2, 600: 2})
+    assert fixed.bidir_offset_columns[300] == 2
+    planes = random_planes(700, 200, seed=12)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    run(RipJob(str(src), RipSettings(passes=2, bidir=True), fixed), fixed, tmp_path / "m.tif",
+        machine)
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+    # and the uncalibrated profile on the same machine does not print exactly
+    run(RipJob(str(src), RipSettings(passes=2, bidir=True), profile), profile,
+        tmp_path / "bad.tif", Faults(bidir_error=2))
+    assert not np.array_equal(read_planes(tmp_path / "bad.tif"), planes)
+
+
+def test_head_alignment_finds_a_misplaced_head(tmp_path, profile):
+    import shutil
+    from wideprint.rip.profile import DEFAULT_PROFILE, save_calibration
+    from wideprint.rip.testprints import PatternJob
+    machine = Faults(head_error=[("M1", 12)])            # M1 sits 12 counts (3 columns) right
+    from wideprint.rip.testprints import ALIGN_BLOCK, align_offsets
+    job = PatternJob.for_pattern("head-align", profile, 0)            # 150 dpi: 4 counts/column
+    run(job, profile, tmp_path / "h.tif", machine)
+    media = read_planes(tmp_path / "h.tif")
+    ref = media[:40, :, 3].any(axis=0)                                # K1 reference bars
+    m1_rows = [r for r in range(media.shape[0]) if media[r, :, 1].any()]
+    aligned = []
+    for b, o in enumerate(align_offsets()):
+        blk = slice(b * ALIGN_BLOCK, (b + 1) * ALIGN_BLOCK)
+        m1 = media[m1_rows[0], blk, 1] > 0                            # the first M1 row
+        if np.array_equal(m1, ref[blk]):
+            aligned.append(o)
+    assert aligned == [-3]
+    copy = tmp_path / "p.toml"
+    shutil.copy(DEFAULT_PROFILE, copy)
+    m1 = next(h for h in profile.heads if h.name == "M1")
+    fixed = save_calibration(copy, head_x_counts={"M1": m1.x_counts + 12})
+    planes = random_planes(300, 200, seed=13)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    run(RipJob(str(src), RipSettings(), fixed), fixed, tmp_path / "m.tif", machine,
+        machine=profile)
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
