@@ -69,6 +69,13 @@ class Media:
         self.stray += stray
         self.late += late
 
+    def snapshot(self, step: int = 1) -> tuple[int, np.ndarray]:
+        """(first image row, copy of the rows still under or near the heads), every
+        `step`-th row and column: a live view paints this over what it already has, since
+        rows before it never change again."""
+        first = -(-self._base // step) * step
+        return first, self._win[first - self._base::step, ::step].copy()
+
     def flush_below(self, row: int) -> None:
         """Rows < row can receive no more drops: write them out."""
         row = min(row, self.height)
