@@ -260,8 +260,12 @@ def cmd_emulator(args) -> int:
                       media_path=(lambda job: media.format(job=job) if "{job}" in media else media)
                       if media else None, event_log=args.event_log, **options)
     server = EmulatorServer(printer, host="127.0.0.1", data_port=args.data_port,
-                            serial_tcp_port=args.serial_port)
+                            serial_tcp_port=args.serial_port, data_pty=args.data_pty)
     print(f"device: {server.device_spec}", flush=True)
+    if not args.data_pty:
+        host = server.data_listener.getsockname()[0]
+        print(f"device (USB): serial={server.serial_spec},data=usb-emu://{host}:{server.data_port}",
+              flush=True)
     signal.signal(signal.SIGTERM, lambda *a: server.stop())
     try:
         server.serve_forever()
@@ -269,6 +273,46 @@ def cmd_emulator(args) -> int:
         pass
     finally:
         server.close()
+    return EXIT_OK
+
+
+def cmd_devices(args) -> int:
+    """What printers this machine can reach: serial ports, USB printers, device nodes."""
+    import glob
+    from ..driver.transport import USB_PID, USB_VID
+    try:
+        from serial.tools import list_ports
+        ports = list(list_ports.comports())
+    except Exception as exc:  # noqa: BLE001 - listing must never crash
+        ports, err = [], exc
+        print(f"serial ports: cannot list ({err})")
+    print("serial ports (command channel):")
+    for p in ports:
+        print(f"  {p.device:20s} {p.description}" + (f" [{p.hwid}]" if p.hwid != "n/a" else ""))
+    if not ports:
+        print("  none")
+    print(f"USB printers {USB_VID:04x}:{USB_PID:04x} (data channel):")
+    try:
+        import usb.core
+        import usb.util
+        found = list(usb.core.find(find_all=True, idVendor=USB_VID, idProduct=USB_PID) or [])
+        for d in found:
+            try:
+                serial = usb.util.get_string(d, d.iSerialNumber)
+            except Exception:  # noqa: BLE001 - no permission: say so
+                serial = "? (no permission: install resources/udev/60-wideprint.rules)"
+            print(f"  usb://{USB_VID:04x}:{USB_PID:04x}/{serial}  bus {d.bus} address {d.address}")
+        if not found:
+            print("  none")
+    except usb.core.NoBackendError:
+        print("  cannot look: libusb-1.0 is not installed (Debian: apt-get install libusb-1.0-0)")
+    nodes = sorted(glob.glob("/dev/wideprint*"))
+    print("PCI card device nodes (data channel):")
+    for n in nodes:
+        print(f"  {n}")
+    if not nodes:
+        print("  none")
+    print("emulator: --device emulator (in-process), or run `wideprint emulator` for a spec")
     return EXIT_OK
 
 
@@ -301,6 +345,9 @@ def build_parser() -> argparse.ArgumentParser:
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
 
+    p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
+    p.set_defaults(func=cmd_devices)
+
     from ..rip.testprints import PATTERNS
     p = sub.add_parser("test-print", help="print a test pattern (nozzle check, line, sawtooth, "
                        "bidirectional and head alignment)")
@@ -324,6 +371,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data-port", type=int, default=0, help="TCP port of the data channel (0 = any)")
     p.add_argument("--serial-port", type=int, default=None,
                    help="serve the command channel on this TCP port instead of a pty")
+    p.add_argument("--data-pty", action="store_true",
+                   help="serve the data channel on a pty (stands in for the PCI card's device node)")
     p.add_argument("--media-out", metavar="MEDIA.tif", help="media file ({job} = job id)")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE")
     p.add_argument("--event-log", metavar="JSONL")

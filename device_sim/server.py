@@ -16,7 +16,7 @@ from .printer import Printer
 
 class EmulatorServer:
     def __init__(self, printer: Printer, host: str = "127.0.0.1", data_port: int = 0,
-                 serial_tcp_port: int | None = None):
+                 serial_tcp_port: int | None = None, data_pty: bool = False):
         self.printer = printer
         self.sel = selectors.DefaultSelector()
         self.running = False
@@ -37,6 +37,16 @@ class EmulatorServer:
         self.data_listener = self._listen(host, data_port, self._accept_data)
         self._last_serial = 0.0
         self._data_conn: socket.socket | None = None
+        # the PCI card's device node, stood in for by a pty: one fd, blocks in, reports out
+        self.data_pty_path = None
+        self._data_master = None
+        if data_pty:
+            self._data_master, dslave = os.openpty()
+            tty.setraw(dslave)
+            self.data_pty_path = os.ttyname(dslave)
+            self._data_slave = dslave
+            os.set_blocking(self._data_master, False)
+            self.sel.register(self._data_master, selectors.EVENT_READ, self._on_data_pty)
 
     def _listen(self, host, port, handler) -> socket.socket:
         s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -60,6 +70,8 @@ class EmulatorServer:
     @property
     def device_spec(self) -> str:
         host = self.data_listener.getsockname()[0]
+        if self.data_pty_path:
+            return f"serial={self.serial_spec},data={self.data_pty_path}"
         return f"serial={self.serial_spec},data=tcp://{host}:{self.data_port}"
 
     # -- handlers ---------------------------------------------------------------------------
@@ -140,9 +152,21 @@ class EmulatorServer:
             return
         self._flush_data_out()
 
+    def _on_data_pty(self, fd) -> None:
+        try:
+            data = os.read(fd, 1 << 20)
+        except (BlockingIOError, OSError):
+            return
+        self.printer.data_link_up()
+        self.printer.data_in(data)
+        self._flush_data_out()
+
     def _flush_data_out(self) -> None:
         """FPGA reports go out on the data connection, whichever input caused them."""
         out = self.printer.data_out()
+        if out and self._data_master is not None:
+            os.write(self._data_master, out)
+            return
         if out and self._data_conn is not None:
             self._data_conn.setblocking(True)
             try:
@@ -173,3 +197,6 @@ class EmulatorServer:
         if self.master is not None:
             os.close(self.master)
             os.close(self._slave)
+        if self._data_master is not None:
+            os.close(self._data_master)
+            os.close(self._data_slave)

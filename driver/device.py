@@ -1,68 +1,27 @@
 """Opening a printer from a device spec (docs/driver.md):
 
-    emulator                                  in-process emulator (tests, demos)
-    serial=PORT,data=URL                      a real or standalone-emulated printer
-        PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT
-        URL:  tcp://HOST:PORT (standalone emulator)
+    emulator                      in-process emulator (tests, demos)
+    emulator-usb                  in-process emulator, data channel through pyusb
+    serial=PORT,data=URL[,baud=N] a real or standalone-emulated printer
+        PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT (pyserial)
+        URL:  usb://VID:PID[/SERIAL]   USB bulk (libusb)
+              /dev/NODE                the PCI card's device node (or a pty stand-in)
+              tcp://HOST:PORT          the standalone emulator's data port
+              usb-emu://HOST:PORT      the standalone emulator as a USB device (pyusb)
 
 and the host-side printer handle the job talks to.
 """
 
 from __future__ import annotations
 
-import socket
 import struct
-import threading
-import time
 import zlib
 from dataclasses import dataclass
 
 from . import protocol as P
 from .link import CommandLink, LinkError
+from .transport import NodeData, TcpData, UsbData
 from ..rip.profile import Profile
-
-
-class TcpData:
-    """Data channel over TCP (the standalone emulator)."""
-
-    def __init__(self, host: str, port: int):
-        self.addr = (host, port)
-        self.name = f"tcp://{host}:{port}"
-        self.sock: socket.socket | None = None
-        self.reconnect()
-
-    def reconnect(self) -> None:
-        self.close()
-        self.sock = socket.create_connection(self.addr, timeout=5.0)
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def send(self, data: bytes) -> None:
-        if self.sock is None:
-            raise ConnectionError("data link closed")
-        self.sock.sendall(data)
-
-    def recv(self, timeout: float = 0.0) -> bytes:
-        if self.sock is None:
-            raise ConnectionError("data link closed")
-        self.sock.settimeout(timeout if timeout > 0 else 0.0)
-        chunks = []
-        try:
-            while True:
-                chunk = self.sock.recv(65536)
-                if not chunk:
-                    raise ConnectionError("data link closed by the printer")
-                chunks.append(chunk)
-                self.sock.settimeout(0.0)
-        except (BlockingIOError, socket.timeout):
-            pass
-        return b"".join(chunks)
-
-    def close(self) -> None:
-        if self.sock is not None:
-            try:
-                self.sock.close()
-            finally:
-                self.sock = None
 
 
 @dataclass
@@ -101,6 +60,28 @@ class Device:
                 close()
 
 
+def open_data(url: str):
+    """A data-channel transport from its URL."""
+    try:
+        if url.startswith("tcp://"):
+            host, _, port = url[6:].rpartition(":")
+            return TcpData(host or "127.0.0.1", int(port))
+        if url.startswith("usb-emu://"):
+            from ..device_sim.usb_backend import EmulatorUsbBackend
+            host, _, port = url[10:].rpartition(":")
+            return UsbData(backend=EmulatorUsbBackend(TcpData(host or "127.0.0.1", int(port))))
+        if url.startswith("usb://"):
+            ids, _, serial = url[6:].partition("/")
+            vid, _, pid = ids.partition(":")
+            return UsbData(int(vid, 16), int(pid, 16), serial or None)
+        if url.startswith("/"):
+            return NodeData(url)
+    except (OSError, ConnectionError) as exc:
+        raise LinkError(f"cannot open data channel {url}: {exc}") from None
+    raise ValueError(f"data channel {url!r}: use usb://VID:PID[/SERIAL], /dev/NODE, "
+                     f"tcp://HOST:PORT or usb-emu://HOST:PORT")
+
+
 def open_device(spec: str, profile: Profile, faults=None, media_path=None,
                 event_log=None, machine_profile: Profile | None = None,
                 **emulator_options) -> Device:
@@ -109,12 +90,15 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None,
     record_latched)."""
     spec = spec.strip()
     timeout = float(profile.raw["link"]["response_timeout_s"])
-    if spec == "emulator":
+    if spec in ("emulator", "emulator-usb"):
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer
         printer = Printer(machine_profile or profile, faults, media_path=media_path,
                           event_log=event_log, **emulator_options)
         serial_port, data = in_process(printer)
+        if spec == "emulator-usb":
+            from ..device_sim.usb_backend import EmulatorUsbBackend
+            data = UsbData(backend=EmulatorUsbBackend(data))
         return Device(CommandLink(serial_port, timeout), data, profile, emulator=printer)
     parts = dict(p.split("=", 1) for p in spec.split(",") if "=" in p)
     if "serial" not in parts or "data" not in parts:
@@ -125,13 +109,9 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None,
         port = serial.serial_for_url(parts["serial"], baudrate=baud, timeout=0.02)
     except (serial.SerialException, ValueError) as exc:
         raise LinkError(f"cannot open {parts['serial']}: {exc}") from None
-    url = parts["data"]
-    if url.startswith("tcp://"):
-        host, _, p = url[6:].rpartition(":")
-        try:
-            data = TcpData(host or "127.0.0.1", int(p))
-        except OSError as exc:
-            raise LinkError(f"cannot connect data channel {url}: {exc}") from None
-    else:
-        raise ValueError(f"data channel {url!r}: supported: tcp://HOST:PORT")
+    try:
+        data = open_data(parts["data"])
+    except Exception:
+        port.close()
+        raise
     return Device(CommandLink(port, timeout), data, profile)

@@ -12,10 +12,10 @@ from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.planes import read_planes
 
 
-def print_job(tmp_path, profile, faults, settings=None, planes=None):
+def print_job(tmp_path, profile, faults, settings=None, planes=None, spec="emulator"):
     planes = random_planes(900, 1500, seed=21) if planes is None else planes
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    dev = open_device("emulator", profile, faults, media_path=str(tmp_path / "m.tif"))
+    dev = open_device(spec, profile, faults, media_path=str(tmp_path / "m.tif"))
     try:
         rep = PrintJob(dev, RipJob(str(src), settings or RipSettings(passes=2, bidir=True),
                                    profile)).run()
@@ -24,9 +24,11 @@ def print_job(tmp_path, profile, faults, settings=None, planes=None):
     return rep, dev.emulator, planes, read_planes(tmp_path / "m.tif")
 
 
-@pytest.mark.parametrize("after", [1, 5, 40, 200])
-def test_data_link_dropped_mid_job_resumes_bit_exact(tmp_path, profile, after):
-    rep, emu, planes, media = print_job(tmp_path, profile, Faults(data_drop_after=after))
+@pytest.mark.parametrize("after,spec", [(1, "emulator"), (5, "emulator"), (40, "emulator"),
+                                        (200, "emulator"), (40, "emulator-usb")])
+def test_data_link_dropped_mid_job_resumes_bit_exact(tmp_path, profile, after, spec):
+    rep, emu, planes, media = print_job(tmp_path, profile, Faults(data_drop_after=after),
+                                        spec=spec)
     assert any(e["event"] == "data_link_lost" for e in emu.events)
     assert rep.recoveries >= 1
     assert np.array_equal(media, planes)

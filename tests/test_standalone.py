@@ -21,15 +21,24 @@ def start_emulator(tmp_path, *extra):
     return proc, line.split(" ", 1)[1].strip()
 
 
-@pytest.mark.parametrize("serial", ["pty", "socket"])
-def test_print_through_standalone_emulator(tmp_path, serial):
-    extra = [] if serial == "pty" else ["--serial-port", "0"]
+@pytest.mark.parametrize("serial,data", [("pty", "tcp"), ("socket", "tcp"), ("pty", "usb"),
+                                         ("pty", "node")])
+def test_print_through_standalone_emulator(tmp_path, serial, data):
+    extra = ([] if serial == "pty" else ["--serial-port", "0"]) + \
+        (["--data-pty"] if data == "node" else [])
     proc, spec = start_emulator(tmp_path, *extra)
     try:
+        if data == "usb":
+            usb_line = proc.stdout.readline()
+            assert usb_line.startswith("device (USB): ")
+            spec = usb_line.split(": ", 1)[1].strip()
+            assert ",data=usb-emu://127.0.0.1:" in spec
         if serial == "pty":
             assert spec.startswith("serial=/dev/pts/")
         else:
             assert spec.startswith("serial=socket://127.0.0.1:")
+        if data == "node":
+            assert ",data=/dev/pts/" in spec
         planes = random_planes(400, 260, seed=11)
         src = write_cmyk_tiff(tmp_path / "in.tif", planes)
         r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", str(src),
