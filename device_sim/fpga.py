@@ -90,7 +90,7 @@ class Fpga:
             return self.status_word()
         if P.REG_FIFO_LEVEL0 <= addr < P.REG_FIFO_LEVEL0 + 8:
             h = addr - P.REG_FIFO_LEVEL0
-            return self.fifo_level_words() if h < self.n_heads else 0
+            return min(self.fifo_level_words(), 0xFFFF) if h < self.n_heads else 0
         if addr == P.REG_UNDERRUN:
             return self.underrun_mask
         if addr == P.REG_CONFIG:

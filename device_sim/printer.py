@@ -233,7 +233,7 @@ class Printer:
         f = self.fpga
         if f.underrun_mask:
             flags |= P.REPORT_UNDERRUN
-        levels = [f.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
+        levels = [min(f.fifo_level_words(), 0xFFFF)] * self.n_heads + [0] * (8 - self.n_heads)
         self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved, f.fired,
                                    tuple(levels)).encode()
 
@@ -290,7 +290,7 @@ class Printer:
                 flags |= bit
         motion = P.Motion.PRINTING if self.busy() else self.motion
         fires = self.fpga.fired
-        levels = [self.fpga.fifo_level_words()] * self.n_heads + [0] * (8 - self.n_heads)
+        levels = [min(self.fpga.fifo_level_words(), 0xFFFF)] * self.n_heads + [0] * (8 - self.n_heads)
         return P.Status(P.Result.OK, flags, motion, self.counter(), 0, self.paper_steps,
                         self.fpga.pass_id, fires, self.fault, self.fault_head, self.fault_pass,
                         self.fault_column, self.fpga.ring_free(), tuple(levels))
