@@ -129,8 +129,14 @@ def fault_message(st: P.Status, profile) -> str:
 
 class PrintJob:
     def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None,
-                 speed_mm_s: float | None = None, allow_overspeed: bool = False):
+                 speed_mm_s: float | None = None, allow_overspeed: bool = False,
+                 resume: dict | None = None):
+        """resume: a checkpoint from an earlier run of the same job on the same printer
+        (the `checkpoint` event / attribute): placement, paper origin and the next pass;
+        passes before it are not printed again."""
         self.dev = device
+        self.resume = resume
+        self.checkpoint: dict = {}
         self.speed_mm_s = speed_mm_s
         self.allow_overspeed = allow_overspeed
         self.rip = rip
@@ -355,16 +361,24 @@ class PrintJob:
             self._recovering(self.prepare, "connecting")
             self._read_head_temps()
             self._state("printing")
-            x0 = self._recovering(self.place, "placing the job")
+            x0 = self.resume["x0"] if self.resume else self._recovering(self.place, "placing the job")
             planner = rip.planner()
             rep.passes_total = self.telemetry.passes_total = planner.total_passes
             link = self.dev.link
             begin = struct.pack(P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height,
                                 rip.settings.dpi, prof.row_nm, planner.y0_rows)
             self._recovering(lambda: link.command(P.Op.JOB_BEGIN, begin), "starting the job")
-            paper0 = self._recovering(lambda: link.status().paper_steps, "reading the paper position")
+            paper0 = self.resume["paper0"] if self.resume else self._recovering(
+                lambda: link.status().paper_steps, "reading the paper position")
+            next_pass = self.resume["next_pass"] if self.resume else 0
+            self._checkpoint(x0=x0, paper0=paper0, next_pass=next_pass)
             top0 = planner.top_row(0)
             for pd in rip.passes(planner):
+                if pd.index < next_pass:             # printed before the interruption
+                    rep.passes_printed += 1
+                    for c in range(4):
+                        rep.drops[c] += int(pd.dots[c])
+                    continue
                 self._between_passes(pd.index)
                 self.telemetry.pass_index = pd.index
                 target = paper0 + prof.feed_steps_for_rows(pd.top_row - top0)
@@ -374,6 +388,7 @@ class PrintJob:
                 self.print_pass(pd, x0)
                 rep.passes_printed += 1
                 self.telemetry.passes_printed = rep.passes_printed
+                self._checkpoint(next_pass=pd.index + 1)
                 self._read_head_temps()
                 for c in range(4):
                     rep.drops[c] += int(pd.dots[c])
@@ -408,6 +423,10 @@ class PrintJob:
             rep.area_m2 = (rip.width * k / prof.counts_per_inch * 0.0254) * \
                 (rip.height * prof.row_um * 1e-6)
         return rep
+
+    def _checkpoint(self, **values) -> None:
+        self.checkpoint.update(values)
+        self.on_event("checkpoint", checkpoint=dict(self.checkpoint))
 
     def _estop(self) -> None:
         try:

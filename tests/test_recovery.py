@@ -47,3 +47,31 @@ def test_serial_noise_prints_bit_exact(tmp_path, profile, faults):
     assert rep.retries > 0
     assert np.array_equal(media, planes)
     assert emu.jobs_done[1]["stray"] == 0
+
+
+def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile):
+    """A host that died after pass 3 (the printer kept its state) resumes at pass 4: the
+    media equals an uninterrupted print (the server's crash recovery builds on this)."""
+    from wideprint.driver.job import JobCancelled
+    planes = random_planes(900, 400, seed=41)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    dev = open_device("emulator", profile, media_path=str(tmp_path / "m.tif"))
+    checkpoints = []
+
+    def on_event(kind, **kw):
+        if kind == "checkpoint":
+            checkpoints.append(kw["checkpoint"])
+            if kw["checkpoint"].get("next_pass") == 4:
+                first.control.cancel()           # the host "dies" between passes
+    first = PrintJob(dev, RipJob(str(src), RipSettings(passes=2), profile), on_event=on_event)
+    with pytest.raises(JobCancelled):
+        first.run()
+    cp = checkpoints[-1]
+    assert cp["next_pass"] == 4
+    again = PrintJob(dev, RipJob(str(src), RipSettings(passes=2), profile), resume=cp)
+    rep = again.run()
+    dev.emulator.close()
+    assert rep.state == "done"
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+    lines = [e["pass_id"] for e in dev.emulator.events if e["event"] == "line"]
+    assert len(lines) == len(set(lines))                       # no pass printed twice
