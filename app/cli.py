@@ -17,6 +17,8 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dither", choices=METHODS, default="fs", help="halftone (default fs)")
     p.add_argument("--passes", type=int, choices=(1, 2, 3, 4, 6, 8), default=1)
     p.add_argument("--bidir", action="store_true", help="print in both carriage directions")
+    p.add_argument("--pass-mask", choices=("checker", "random", "feather"), default="checker",
+                   help="how dots are shared between passes (docs/geometry.md)")
     p.add_argument("--dpi", type=int, choices=(150, 300, 600), default=300,
                    help="scan-direction resolution (encoder trigger mode)")
     p.add_argument("--ink-limit", type=float, metavar="PERCENT",
@@ -60,6 +62,7 @@ def _save_latched(printer, path: str) -> None:
 def _settings(args):
     from ..rip.pipeline import RipSettings
     return RipSettings(dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
+                       pass_mask=args.pass_mask,
                        ink_limit=args.ink_limit, input_icc=args.input_icc,
                        output_icc=args.output_icc, intent=args.intent)
 

@@ -27,6 +27,7 @@ class RipSettings:
     passes: int = 1
     bidir: bool = False
     dither: str = "fs"
+    pass_mask: str = "checker"
     ink_limit: float | None = None
     input_icc: str | None = None
     output_icc: str | None = None
@@ -90,7 +91,8 @@ class RipJob:
 
     def planner(self) -> PassPlanner:
         s = self.settings
-        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir)
+        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
+                           s.pass_mask)
 
     def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
         planner = planner or self.planner()

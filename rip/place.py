@@ -52,6 +52,9 @@ MAX_SIDE = 1_000_000
 DEFAULT_PPI = 300.0
 #: side of the square tiles of the rotation spool, pixels
 SPOOL_TILE = 128
+#: rows pulled from libvips per fetch: libvips' sequential line caches grow with the largest
+#: request, so small fetches keep memory low (the bands are re-cut to the caller's height)
+VIPS_FETCH_ROWS = 8
 #: free space left on the temporary file system after a spool is written
 DISK_RESERVE = 64 << 20
 MM_PER_INCH = 25.4
@@ -406,7 +409,12 @@ class PlacedSource:
         """The resampled (not rotated, not mirrored) image in bands of `rows` rows."""
         if not self.resample:
             yield from self.source.bands(rows)
-            return
+        else:
+            yield from _reband(self._resampled(), rows)
+
+    def _resampled(self) -> Iterator[np.ndarray]:
+        """The resampled image in chunks of VIPS_FETCH_ROWS rows."""
+        rows = VIPS_FETCH_ROWS
         import pyvips
 
         src = self.source
@@ -426,9 +434,10 @@ class PlacedSource:
             raise ImageError(self.path, _vips_problem(fmt, str(e), self.path)) from None
         dtype = self.dtype
         c = self.channels
+        step = max(1, min(rows, VIPS_FETCH_ROWS))
         y = 0
         while y < sh:
-            n = min(rows, sh - y)
+            n = min(step, sh - y)
             try:
                 buf = region.fetch(0, y, sw, n)
             except pyvips.Error as e:

@@ -6,8 +6,10 @@ The geometry is docs/geometry.md; in short, with N passes and A rows of paper ad
 - pass p has image row T_p = (p - N + 1) * A - s0 under slot 0, so every image row is
   under the usable run in exactly N consecutive passes p = floor(r/A) + j, j = 0 .. N-1,
   at slot (r mod A) + (N - 1 - j) * A + s0;
-- the pass mask gives each dot one j; a dot whose slot is a dead nozzle moves to the next
-  live j (nozzle-out compensation), so no dot is lost and none is printed twice;
+- the pass mask gives each dot one j (checker: (x + r) mod N; random: blue-noise ranks
+  split evenly; feather: blue-noise ranks split by weights that fall off towards the ends
+  of the nozzle run, hiding pass-boundary banding); a dot whose slot is a dead nozzle
+  moves to the next live j (nozzle-out compensation), so no dot is lost or doubled;
 - head h fires image column x at trigger column x - x_h / k (k = counts per column);
   reverse passes fire in descending columns, shifted by the profile's bidir offset.
 Memory: a rolling window of N*A rows plus one input band.
@@ -23,7 +25,9 @@ from numba import njit
 from .profile import COLORS, Profile, ProfileError
 
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)
-PASS_MASKS = ("checker",)
+PASS_MASKS = ("checker", "random", "feather")
+MASK_LEVELS = 256           # quantisation of the random / feather masks
+FEATHER = 0.25              # fraction of the nozzle run, at each end, that fades out
 
 
 @dataclass
@@ -59,6 +63,8 @@ class PassPlanner:
         self.total_passes = -(-height // self.advance) + passes - 1
         self._slot_table = profile.slot_table()
         self._remap = self._dead_nozzle_remap()
+        self.mask = mask
+        self._qmask, self._sel = self._pass_mask(mask)
         hpc = profile.heads_per_color
         # per head: nozzle -> slot
         self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
@@ -111,15 +117,33 @@ class PassPlanner:
                     return h.index, z
         return -1, -1
 
-    def assignment(self, rows: np.ndarray) -> np.ndarray:
-        """(len(rows), W, 4) int16: which j (0..N-1) prints each dot of these rows."""
-        x = np.arange(self.width)
-        m = (x[None, :] + rows[:, None]) % self.n                    # checker pass mask
-        rho = (rows % self.advance)[:, None]
-        out = np.empty((rows.size, self.width, 4), np.int16)
-        for c in range(4):
-            out[:, :, c] = self._remap[c][rho, m]
-        return out
+    def _pass_mask(self, mask: str) -> tuple[np.ndarray, np.ndarray]:
+        """A tile of mask levels q and, per colour and row phase, the j each level selects
+        (dead-nozzle remap included): j(r, x) = sel[c, r mod A, qmask[r mod th, x mod tw]]."""
+        n, a = self.n, self.advance
+        if mask == "checker":
+            t = np.arange(24)                       # 24 = lcm of the pass counts
+            qmask = ((t[:, None] + t[None, :]) % n).astype(np.int16)
+            jsel = np.broadcast_to(np.arange(n), (a, n))
+        else:
+            from .halftone import load_bluenoise_mask
+            ranks = load_bluenoise_mask()
+            qmask = (ranks.astype(np.int64) * MASK_LEVELS // ranks.size).astype(np.int16)
+            u = (np.arange(MASK_LEVELS) + 0.5) / MASK_LEVELS
+            if mask == "random" or n == 1:
+                weights = np.ones((a, n))
+            else:
+                # position of each (row phase, j) slot in the used run, 0..1
+                rho = np.arange(a)[:, None]
+                j = np.arange(n)[None, :]
+                pos = (rho + (n - 1 - j) * a + 0.5) / (n * a)
+                weights = np.clip(np.minimum(pos, 1 - pos) / FEATHER, 0.05, 1.0)
+            cum = np.cumsum(weights / weights.sum(axis=1, keepdims=True), axis=1)
+            jsel = np.minimum((u[None, :, None] > cum[:, None, :]).sum(axis=2), n - 1)
+        sel = np.empty((len(COLORS), a, jsel.shape[1]), np.int16)
+        for c in range(len(COLORS)):
+            sel[c] = np.take_along_axis(self._remap[c], np.asarray(jsel, np.int64), axis=1)
+        return np.ascontiguousarray(qmask), sel
 
     # -- streaming ----------------------------------------------------------------------
     def feed(self, band: np.ndarray) -> list[PassData]:
@@ -167,7 +191,7 @@ class PassPlanner:
         words = np.zeros((len(heads), fires_all, 8), np.uint16)
         dots = np.zeros(4, np.int64)
         _pack_pass(self._buf, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
-                   self._remap, self._slot_table, np.array([h.channel for h in heads]),
+                   self._qmask, self._sel, self._slot_table, np.array([h.channel for h in heads]),
                    np.array([h.y_rows for h in heads]), cols, self.profile.heads_per_color,
                    spread_lo, words, dots)
         used = np.flatnonzero(words.any(axis=(0, 2)))
@@ -185,11 +209,12 @@ class PassPlanner:
 
 
 @njit(cache=True, nogil=True)
-def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, remap, slot_table, head_channel,
+def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table, head_channel,
                head_y, head_col, hpc, spread_lo, words, dots):
     """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
     prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
-    pass index j = p - r // advance must equal the (dead-nozzle remapped) checker mask."""
+    pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j."""
+    th, tw = qmask.shape
     width = buf.shape[1]
     for h in range(head_channel.shape[0]):
         ch = head_channel[h]
@@ -208,7 +233,9 @@ def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, remap, slot_table, hea
             word = z >> 4
             bit = np.uint16(1 << (z & 15))
             t_off = -head_col[h] - spread_lo
+            qrow = qmask[r % th]
+            srow = sel[ch, rho]
             for x in range(width):
-                if buf[row, x, ch] and remap[ch, rho, (x + r) % n] == j:
+                if buf[row, x, ch] and srow[qrow[x % tw]] == j:
                     words[h, x + t_off, word] |= bit
                     dots[ch] += 1

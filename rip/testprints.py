@@ -143,7 +143,8 @@ class PatternJob:
 
     def planner(self) -> PassPlanner:
         s = self.settings
-        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir)
+        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
+                           s.pass_mask)
 
     def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
         planner = planner or self.planner()

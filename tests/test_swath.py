@@ -77,18 +77,19 @@ def jobs(draw):
                                    st.integers(1, 126)), min_size=ndead, max_size=ndead, unique=True))
     offsets = draw(st.lists(st.integers(0, 400).map(lambda v: v * 4), min_size=8, max_size=8))
     bidir_off = draw(st.integers(-3, 3))
-    return h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off
+    mask = draw(st.sampled_from(["checker", "random", "feather"]))
+    return h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off, mask
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                    HealthCheck.function_scoped_fixture])
 @given(job=jobs())
 def test_every_dot_fired_once_by_a_live_nozzle(tmp_path_factory, job):
-    h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off = job
+    h, w, density, seed, passes, dpi, bidir, band, dead, offsets, bidir_off, mask = job
     tmp = tmp_path_factory.mktemp("prof")
     try:
         profile = variant_profile(tmp, dead, offsets, bidir={150: bidir_off, 300: bidir_off, 600: bidir_off})
-        planner = PassPlanner(profile, w, h, dpi, passes, bidir)
+        planner = PassPlanner(profile, w, h, dpi, passes, bidir, mask)
     except ProfileError as exc:
         # only acceptable refusal: dead nozzles that leave a row with no live nozzle
         assert "unprintable" in str(exc)
@@ -130,3 +131,23 @@ def test_memory_window_is_bounded(profile):
         pl.feed((rng.random((256, 64, 4)) < 0.2).astype(np.uint8))
         biggest = max(biggest, pl._buf.shape[0])
     assert biggest <= 2 * pl.advance + 256
+
+
+@pytest.mark.parametrize("mask", ["checker", "random", "feather"])
+def test_pass_masks_share_dots_between_passes(profile, mask):
+    """Every pass prints a share of a full field; feathering gives the nozzles at the ends
+    of the run fewer dots than those in the middle."""
+    n, h, w = 4, 1200, 256
+    pl = PassPlanner(profile, w, h, 300, n, mask=mask)
+    full = np.ones((h, w, 4), np.uint8)
+    passes = pl.feed(full) + pl.finish()
+    per_nozzle = np.zeros(profile.nozzles)
+    for pd in passes:
+        bits = P.words_to_nozzles(pd.words[0])
+        per_nozzle += bits.sum(axis=0)
+    used = per_nozzle[2:126]
+    mid, ends = used[len(used) // 2 - 10:len(used) // 2 + 10].mean(), np.r_[used[:8], used[-8:]].mean()
+    if mask == "feather":
+        assert ends < 0.5 * mid
+    else:
+        assert abs(ends - mid) < 0.1 * mid

@@ -1,0 +1,169 @@
+"""The settings of one queued job, as the GUI edits them, and their translation into the
+RIP's RipSettings (+ Placement once RipSettings has a ``placement`` field)."""
+
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+from ...rip.pipeline import RipSettings
+from ...rip.profile import Profile, load_profile
+
+# placement size modes offered by the GUI -> rip.place.Placement fields
+SIZE_MODES = {
+    "original": "Original size (file resolution)",
+    "size": "Width / height (mm)",
+    "scale": "Scale (%)",
+    "fit": "Fit to media width",
+    "pixels": "1 image pixel = 1 dot",
+}
+ROTATIONS = (0, 90, 180, 270)
+FILTERS = ("lanczos3", "cubic", "linear", "nearest")
+DITHER_NAMES = {
+    "fs": "Floyd–Steinberg",
+    "jarvis": "Jarvis–Judice–Ninke",
+    "stucki": "Stucki",
+    "bayer": "Bayer 16×16 (ordered)",
+    "bluenoise": "Blue noise (ordered)",
+}
+INTENT_NAMES = {
+    "perceptual": "Perceptual",
+    "relative": "Relative colorimetric",
+    "saturation": "Saturation",
+    "absolute": "Absolute colorimetric",
+}
+
+
+def placement_supported() -> bool:
+    """RipSettings has a placement field (rip/place.py wired into the pipeline)."""
+    return hasattr(RipSettings(), "placement")
+
+
+@functools.lru_cache(maxsize=16)
+def _load_profile_cached(path: str, mtime: float) -> Profile:
+    return load_profile(path)
+
+
+def cached_profile(path: str | os.PathLike) -> Profile:
+    """load_profile, cached per file modification time (calibration rewrites the file)."""
+    p = str(path)
+    try:
+        mtime = os.stat(p).st_mtime_ns
+    except OSError:
+        mtime = -1
+    return _load_profile_cached(p, mtime)
+
+
+@dataclass
+class JobSettings:
+    profile: str = ""                 # printer profile TOML ("" = the user profile)
+    dpi: int = 300
+    passes: int = 1
+    bidir: bool = False
+    dither: str = "fs"
+    input_icc: str = ""
+    output_icc: str = ""
+    intent: str = "relative"
+    ink_limit: float | None = None    # percent; None = the profile's default (RGB/grey only)
+    copies: int = 1
+    # placement (rip/place.py); used when RipSettings supports it
+    size_mode: str = "original"
+    width_mm: float | None = None
+    height_mm: float | None = None
+    scale_pct: float = 100.0
+    fit_width_mm: float | None = None  # None: the paper's printable width at print time
+    rotate: int = 0
+    mirror: bool = False
+    filter: str = "lanczos3"
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "JobSettings":
+        s = cls()
+        names = {f.name for f in fields(cls)}
+        for k, v in (d or {}).items():
+            if k in names:
+                setattr(s, k, v)
+        s.validate()
+        return s
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def copy(self, **changes) -> "JobSettings":
+        return replace(self, **changes)
+
+    def validate(self) -> None:
+        """Repair values a hand-edited settings file may hold (keeps the GUI startable)."""
+        from ...rip.halftone import METHODS
+        if self.dpi not in (150, 300, 600):
+            self.dpi = 300
+        if self.passes not in (1, 2, 3, 4, 6, 8):
+            self.passes = 1
+        if self.dither not in METHODS:
+            self.dither = "fs"
+        if self.intent not in INTENT_NAMES:
+            self.intent = "relative"
+        if self.size_mode not in SIZE_MODES:
+            self.size_mode = "original"
+        if self.rotate not in ROTATIONS:
+            self.rotate = 0
+        if self.filter not in FILTERS:
+            self.filter = "lanczos3"
+        try:
+            self.copies = max(1, min(999, int(self.copies)))
+        except (TypeError, ValueError):
+            self.copies = 1
+
+    def placement(self, media_width_mm: float | None = None):
+        """A rip.place.Placement for these settings (None when the RIP has no placement)."""
+        if not placement_supported():
+            return None
+        from ...rip.place import Placement
+        kw = dict(rotate=int(self.rotate), mirror=bool(self.mirror), filter=self.filter)
+        m = self.size_mode
+        if m == "pixels":
+            return Placement(size="pixels", **kw)
+        if m == "size" and (self.width_mm or self.height_mm):
+            return Placement(width_mm=self.width_mm or None, height_mm=self.height_mm or None, **kw)
+        if m == "scale":
+            return Placement(scale=float(self.scale_pct) / 100.0, **kw)
+        if m == "fit":
+            w = self.fit_width_mm or media_width_mm
+            if w:
+                return Placement(fit_width_mm=float(w), **kw)
+        return Placement(**kw)
+
+    def rip_settings(self, media_width_mm: float | None = None) -> RipSettings:
+        rs = RipSettings(dpi=int(self.dpi), passes=int(self.passes), bidir=bool(self.bidir),
+                         dither=self.dither, ink_limit=self.ink_limit,
+                         input_icc=self.input_icc or None, output_icc=self.output_icc or None,
+                         intent=self.intent)
+        pl = self.placement(media_width_mm)
+        if pl is not None:
+            rs.placement = pl
+        return rs
+
+    def profile_path(self, user_profile: Path) -> str:
+        return self.profile or str(user_profile)
+
+    def summary(self) -> str:
+        return (f"{self.dpi} dpi, {self.passes} pass{'es' if self.passes > 1 else ''} "
+                f"{'bi' if self.bidir else 'uni'}, {self.dither}")
+
+
+def printable_width_mm(profile: Profile, paper_mm: float | None = None) -> float:
+    """Paper width less both margins (the emulator's sheet when no paper was measured)."""
+    paper = paper_mm or float(profile.raw["paper"]["default_width_mm"])
+    return max(0.0, paper - 2 * float(profile.raw["paper"]["margin_mm"]))
+
+
+def profile_label(path: str | Path, user_profile: Path) -> str:
+    p = Path(path)
+    if p == Path(user_profile):
+        return "User profile (calibrated)"
+    from ...rip.profile import DEFAULT_PROFILE
+    if p == DEFAULT_PROFILE:
+        return "Built-in default"
+    return p.stem

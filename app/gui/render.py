@@ -1,0 +1,185 @@
+"""Preview pictures, computed off the UI thread (no Qt here).
+
+The preview is the RIP's real halftone of a downsampled image: the file is reduced with
+libvips (the loader's own pipeline, so alpha, CMYK JPEG inversion and band layout are
+exactly what the RIP reads), rotated/mirrored like the placement, separated with the
+RIP's Separator (same ICC, intent, ink limit, curves) and halftoned with the RIP's
+Halftoner; render_rgb then paints the enabled separations.  When the image is no larger
+than the preview (small jobs) nothing is resampled and the preview halftone IS the
+halftone the RIP will print, dot for dot.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...rip.color import Separator
+from ...rip.halftone import Halftoner
+from ...rip.load import ImageSource, open_image
+from ...rip.pipeline import RipJob, profile_curves
+from ...rip.planes import render_rgb
+from .estimate import Estimate, estimate
+from .jobsettings import JobSettings, cached_profile
+
+PREVIEW_MAX_PX = 1600
+
+
+@dataclass
+class PreviewData:
+    path: str
+    width_dots: int
+    height_rows: int
+    width_mm: float
+    height_mm: float
+    dpi: int
+    total_passes: int
+    dots: np.ndarray                      # (ph, pw, 4) uint8 0/1: the preview halftone
+    estimate: Estimate
+    source_desc: str = ""                 # "3000 x 2000 px CMYK 8-bit TIFF"
+    exact: bool = False                   # dots are the RIP's halftone, dot for dot
+    seconds: float = 0.0
+    warnings: list = field(default_factory=list)
+
+
+def _vips_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray | None:
+    reader = getattr(src, "_reader", None)
+    if reader is None or not (hasattr(reader, "open") and hasattr(reader, "pipeline")):
+        return None
+    img = reader.pipeline(reader.open())
+    if (tw, th) != (img.width, img.height):
+        img = img.resize(tw / img.width, vscale=th / img.height, kernel="linear")
+    a = img.numpy()
+    if a.ndim == 2:
+        a = a[:, :, None]
+    # resize may round a side by one pixel: crop or pad to the exact size
+    if a.shape[0] != th or a.shape[1] != tw:
+        out = np.zeros((th, tw, a.shape[2]), a.dtype)
+        h, w = min(th, a.shape[0]), min(tw, a.shape[1])
+        out[:h, :w] = a[:h, :w]
+        if h < th:
+            out[h:] = out[h - 1:h]
+        if w < tw:
+            out[:, w:] = out[:, w - 1:w]
+        a = out
+    return np.ascontiguousarray(a)
+
+
+def _band_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray:
+    """Any source (BMP has no libvips pipeline): stream bands, area-average each."""
+    import cv2
+    fy = src.height / th
+    rows = max(1, int(math.ceil(fy)))
+    out = np.zeros((th, tw, src.channels), src.dtype)
+    y_out = 0
+    # gather exactly the source rows that map to each output row (nearest band boundaries)
+    need = [int(round((i + 1) * fy)) for i in range(th)]
+    y_src = 0
+    pending = None
+    for band in src.bands(max(rows, 64)):  # a band holds at least one output row's rows
+        pending = band if pending is None else np.concatenate([pending, band])
+        y_src += band.shape[0]
+        base = y_src - pending.shape[0]
+        while y_out < th and need[y_out] <= y_src:
+            lo = (need[y_out - 1] if y_out else 0) - base
+            hi = need[y_out] - base
+            chunk = pending[max(lo, 0):max(hi, lo + 1)]
+            row = cv2.resize(np.ascontiguousarray(chunk), (tw, 1), interpolation=cv2.INTER_AREA)
+            out[y_out] = row.reshape(tw, -1)
+            y_out += 1
+        keep = (need[y_out - 1] if y_out else 0) - base
+        pending = pending[max(keep, 0):]
+    while y_out < th:
+        out[y_out] = out[y_out - 1] if y_out else 0
+        y_out += 1
+    return out
+
+
+def reduce_image(src: ImageSource, tw: int, th: int) -> np.ndarray:
+    """The whole image reduced to (th, tw, channels), same dtype and value conventions as
+    src.bands() (identity when the size is already right)."""
+    if (tw, th) == (src.width, src.height):
+        return np.ascontiguousarray(np.concatenate(list(src.bands(1024)), axis=0))
+    a = _vips_reduce(src, tw, th)
+    return a if a is not None else _band_reduce(src, tw, th)
+
+
+def place_array(a: np.ndarray, rotate: int, mirror: bool) -> np.ndarray:
+    """Clockwise rotation, then a horizontal mirror (rip.place's order)."""
+    if rotate:
+        a = np.rot90(a, k=-(rotate // 90))
+    if mirror:
+        a = a[:, ::-1]
+    return np.ascontiguousarray(a)
+
+
+def preview_size(width_mm: float, height_mm: float, width_dots: int, height_rows: int,
+                 max_px: int = PREVIEW_MAX_PX) -> tuple[int, int]:
+    """Preview pixels across and along: the same density per mm both ways, at most
+    max_px on the longer side, never more than the job's dots (then it is exact)."""
+    s = max_px / max(width_mm, height_mm, 1e-9)
+    pw = max(1, min(width_dots, int(round(width_mm * s))))
+    ph = max(1, min(height_rows, int(round(height_mm * s))))
+    return pw, ph
+
+
+def compute_preview(path: str, js: JobSettings, profile_path: str,
+                    media_width_mm: float | None = None, max_px: int = PREVIEW_MAX_PX,
+                    cancelled=lambda: False) -> PreviewData:
+    """Open, place, separate and halftone a reduced copy of the image; estimate the job.
+    Raises ImageError / ValueError (shown in the queue row)."""
+    t0 = time.monotonic()
+    profile = cached_profile(profile_path)
+    rs = js.rip_settings(media_width_mm)
+    job = RipJob(path, rs, profile)
+    try:
+        W, H = job.width, job.height
+        planner = job.planner()
+        total = planner.total_passes
+        k = profile.k(rs.dpi)
+        width_mm = W * k / profile.counts_per_inch * 25.4
+        height_mm = H * profile.row_um / 1000.0
+        pw, ph = preview_size(width_mm, height_mm, W, H, max_px)
+        quarter = js.rotate in (90, 270) and hasattr(rs, "placement")
+        rotate = int(js.rotate) if hasattr(rs, "placement") else 0
+        mirror = bool(js.mirror) if hasattr(rs, "placement") else False
+        src = open_image(path)
+        try:
+            tw, th = (ph, pw) if quarter else (pw, ph)
+            if cancelled():
+                raise InterruptedError
+            small = reduce_image(src, tw, th)
+            small = place_array(small, rotate, mirror)
+            sep = Separator(src.colorspace, src.depth, embedded_icc=src.icc,
+                            input_icc=rs.input_icc, output_icc=rs.output_icc, intent=rs.intent,
+                            ink_limit=job.ink_limit, curves=profile_curves(profile))
+            if cancelled():
+                raise InterruptedError
+            ink = sep.convert(small)
+            dots = Halftoner(rs.dither, pw, channels=4).process(np.ascontiguousarray(ink))
+            desc = (f"{src.width} × {src.height} px {src.colorspace.upper() if src.colorspace != 'grey' else 'grey'} "
+                    f"{src.depth}-bit {(src.format or '').upper()}").strip()
+            warnings = list(getattr(sep, "warnings", []))
+        finally:
+            src.close()
+        drops = dots.reshape(-1, 4).sum(axis=0, dtype=np.int64)
+        est = estimate(profile, W, H, rs.dpi, rs.passes, rs.bidir, total, js.copies,
+                       preview_drops=drops, preview_dots=pw * ph)
+        exact = (pw, ph) == (W, H) and rotate == 0 and not mirror
+        return PreviewData(path=path, width_dots=W, height_rows=H, width_mm=width_mm,
+                           height_mm=height_mm, dpi=rs.dpi, total_passes=total, dots=dots,
+                           estimate=est, source_desc=desc, exact=exact,
+                           seconds=time.monotonic() - t0, warnings=warnings)
+    finally:
+        job.close()
+
+
+def render_separations(dots: np.ndarray, enabled) -> np.ndarray:
+    """(h, w, 3) uint8 sRGB of the enabled separations (C, M, Y, K flags)."""
+    mask = np.array([1 if e else 0 for e in enabled], np.uint8)
+    if mask.all():
+        return render_rgb(dots)
+    return render_rgb(dots * mask)
