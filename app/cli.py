@@ -59,6 +59,15 @@ def _save_latched(printer, path: str) -> None:
     np.savez_compressed(path, **np_arrays)
 
 
+def _close_device(dev, args) -> None:
+    """Emulator outputs are complete once it is closed."""
+    if dev.emulator is not None:
+        dev.emulator.close()
+        if getattr(args, "latched_out", None):
+            _save_latched(dev.emulator, args.latched_out)
+    dev.close()
+
+
 def _settings(args):
     from ..rip.pipeline import RipSettings
     return RipSettings(dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
@@ -188,11 +197,7 @@ def cmd_print(args) -> int:
                 print(f"{f}: FAILED: {exc}", file=sys.stderr)
             reports.append(rep)
     finally:
-        if dev.emulator is not None:
-            dev.emulator.close()
-            if args.latched_out:
-                _save_latched(dev.emulator, args.latched_out)
-        dev.close()
+        _close_device(dev, args)
     if args.report:
         Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
     if args.json:
@@ -236,11 +241,7 @@ def cmd_test_print(args) -> int:
         print(f"{args.pattern}: FAILED: {exc}", file=sys.stderr)
         return EXIT_JOB_FAILED
     finally:
-        if dev.emulator is not None:
-            dev.emulator.close()
-            if args.latched_out:
-                _save_latched(dev.emulator, args.latched_out)
-        dev.close()
+        _close_device(dev, args)
 
 
 def cmd_emulator(args) -> int:

@@ -51,43 +51,21 @@ def profile_curves(profile: Profile) -> np.ndarray | None:
     return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
 
 
-@dataclass
-class RipJob:
-    """One file ripped for one printer: the image area in device dots and the passes.
-    1 image pixel = 1 device dot (columns at the dpi mode, rows at the profile's row pitch)."""
+class PrintableJob:
+    """What the driver prints: an image area of width x height device dots, its halftone
+    bands, and the passes planned from them.  Subclasses give `halftone_bands()`."""
     path: str
-    settings: RipSettings = field(default_factory=RipSettings)
-    profile: Profile = field(default_factory=load_profile)
-
-    def __post_init__(self):
-        self.settings.check(self.profile)
-        self.source: ImageSource = open_image(self.path)
-        self.width, self.height = self.source.width, self.source.height
-
-    @property
-    def ink_limit(self) -> float | None:
-        """--ink-limit if given; else the profile's limit for separations we make (RGB,
-        grey); CMYK files print as they are."""
-        if self.settings.ink_limit is not None:
-            return self.settings.ink_limit
-        if self.source.colorspace == "cmyk":
-            return None
-        return self.profile.raw.get("color", {}).get("ink_limit_percent")
+    settings: RipSettings
+    profile: Profile
+    width: int
+    height: int
 
     @property
     def dpi_y(self) -> float:
         return 25.4e3 / self.profile.row_um
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
-        """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
-        s = self.settings
-        sep = Separator(self.source.colorspace, self.source.depth,
-                        embedded_icc=self.source.icc, input_icc=s.input_icc,
-                        output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
-                        curves=profile_curves(self.profile))
-        ht = Halftoner(s.dither, self.width, channels=4)
-        for band in self.source.bands(s.band_rows):
-            yield ht.process(sep.convert(band))
+        raise NotImplementedError
 
     def planner(self) -> PassPlanner:
         s = self.settings
@@ -109,6 +87,44 @@ class RipJob:
                 dots += band.reshape(-1, 4).sum(axis=0, dtype=np.int64)
                 w.write(band)
         return dots
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass
+class RipJob(PrintableJob):
+    """One file ripped for one printer: the image area in device dots and the passes.
+    1 image pixel = 1 device dot (columns at the dpi mode, rows at the profile's row pitch)."""
+    path: str
+    settings: RipSettings = field(default_factory=RipSettings)
+    profile: Profile = field(default_factory=load_profile)
+
+    def __post_init__(self):
+        self.settings.check(self.profile)
+        self.source: ImageSource = open_image(self.path)
+        self.width, self.height = self.source.width, self.source.height
+
+    @property
+    def ink_limit(self) -> float | None:
+        """--ink-limit if given; else the profile's limit for separations we make (RGB,
+        grey); CMYK files print as they are."""
+        if self.settings.ink_limit is not None:
+            return self.settings.ink_limit
+        if self.source.colorspace == "cmyk":
+            return None
+        return self.profile.raw.get("color", {}).get("ink_limit_percent")
+
+    def halftone_bands(self) -> Iterator[np.ndarray]:
+        """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
+        s = self.settings
+        sep = Separator(self.source.colorspace, self.source.depth,
+                        embedded_icc=self.source.icc, input_icc=s.input_icc,
+                        output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
+                        curves=profile_curves(self.profile))
+        ht = Halftoner(s.dither, self.width, channels=4)
+        for band in self.source.bands(s.band_rows):
+            yield ht.process(sep.convert(band))
 
     def close(self) -> None:
         self.source.close()

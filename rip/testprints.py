@@ -20,15 +20,12 @@ printed through the same planner and driver as any image.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from .pipeline import RipSettings
-from .planes import PlanesWriter
+from .pipeline import PrintableJob, RipSettings
 from .profile import Profile, load_profile
-from .swath import PassData, PassPlanner
 
 PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
 ALIGN_RANGE = 4          # candidate offsets -4 .. +4 columns
@@ -117,12 +114,13 @@ def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
 
 
 @dataclass
-class PatternJob:
+class PatternJob(PrintableJob):
     """A test print with the RipJob interface the driver uses (width, height, settings,
     planner(), passes(), write_planes())."""
     kind: str
     planes: np.ndarray
     settings: RipSettings = field(default_factory=lambda: RipSettings(passes=1))
+    profile: Profile = field(default_factory=load_profile)
 
     @classmethod
     def for_pattern(cls, kind: str, profile: Profile, width: int, dpi: int = 150,
@@ -131,32 +129,11 @@ class PatternJob:
         planes = make_pattern(kind, profile, width, **kw)
         return cls(kind, planes, RipSettings(dpi=dpi, passes=1, bidir=kind == "bidir-align"),
                    profile)
-    profile: Profile = field(default_factory=load_profile)
 
     def __post_init__(self):
         self.path = f"test-print:{self.kind}"
         self.height, self.width = self.planes.shape[:2]
 
-    @property
-    def dpi_y(self) -> float:
-        return 25.4e3 / self.profile.row_um
-
-    def planner(self) -> PassPlanner:
-        s = self.settings
-        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                           s.pass_mask)
-
-    def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
-        planner = planner or self.planner()
+    def halftone_bands(self) -> Iterator[np.ndarray]:
         for y in range(0, self.height, self.settings.band_rows):
-            yield from planner.feed(self.planes[y:y + self.settings.band_rows])
-        yield from planner.finish()
-
-    def write_planes(self, out: str | Path) -> np.ndarray:
-        with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
-                          description=self.path) as w:
-            w.write(self.planes)
-        return self.planes.reshape(-1, 4).sum(axis=0, dtype=np.int64)
-
-    def close(self) -> None:
-        pass
+            yield self.planes[y:y + self.settings.band_rows]
