@@ -17,7 +17,8 @@ from . import protocol as P
 from .device import Device
 from .link import DeviceError, LinkError
 from .stream import PassStreamer, StreamError
-from ..rip.pipeline import RipJob
+from ..rip.load import ImageError
+from ..rip.pipeline import RipJob, prefetch
 from ..rip.swath import PassData
 
 log = logging.getLogger("wideprint.job")
@@ -373,7 +374,7 @@ class PrintJob:
             next_pass = self.resume["next_pass"] if self.resume else 0
             self._checkpoint(x0=x0, paper0=paper0, next_pass=next_pass)
             top0 = planner.top_row(0)
-            for pd in rip.passes(planner):
+            for pd in prefetch(rip.passes(planner), depth=2):
                 if pd.index < next_pass:             # printed before the interruption
                     rep.passes_printed += 1
                     for c in range(4):
@@ -407,7 +408,8 @@ class PrintJob:
             self._safe_stop()
             self._state("cancelled", str(exc))
             raise
-        except (JobError, LinkError, DeviceError, StreamError) as exc:
+        except (JobError, LinkError, DeviceError, StreamError, ImageError) as exc:
+            # ImageError: the file broke while streaming (a corrupt strip far down)
             rep.state = "failed"
             rep.message = str(exc)
             self._safe_stop()

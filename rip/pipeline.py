@@ -40,6 +40,44 @@ class RipSettings:
         profile.k(self.dpi)
 
 
+def prefetch(items: Iterator, depth: int = 2) -> Iterator:
+    """Run a generator in a background thread, `depth` items ahead, so the RIP works on
+    the next passes while the printer prints this one.  Exceptions arrive in order."""
+    import queue
+    import threading
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    done = object()
+    stop = threading.Event()
+
+    def produce():
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put(done)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+
+    t = threading.Thread(target=produce, name="rip-prefetch", daemon=True)
+    t.start()
+    try:
+        while True:
+            item = q.get()
+            if item is done:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+
+
 def profile_curves(profile: Profile) -> np.ndarray | None:
     """(4, 256) uint8 linearisation LUT from the profile's [curves], None if identity."""
     raw = profile.raw.get("curves", {})

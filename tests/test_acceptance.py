@@ -86,3 +86,31 @@ def test_cli_bad_file_fails_its_job_and_the_next_prints(tmp_path):
     reports = json.loads(r.stdout)
     assert [x["state"] for x in reports] == ["failed", "done"]
     assert np.array_equal(read_planes(tmp_path / "m-2.tif"), random_planes(50, 40, seed=9))
+
+
+def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
+    """A strip deep in the file is garbage: the job fails naming the file; the printer is
+    left stopped with the heads off, ready for the next job."""
+    import tifffile
+    planes = random_planes(2000, 300, seed=17)
+    path = tmp_path / "late.tif"
+    tifffile.imwrite(path, planes * 255, photometric="separated", compression="deflate",
+                     rowsperstrip=64)
+    with tifffile.TiffFile(path) as t:
+        off = t.pages[0].tags["StripOffsets"].value[-5]
+        cnt = t.pages[0].tags["StripByteCounts"].value[-5]
+    raw = bytearray(path.read_bytes())
+    raw[off:off + cnt] = np.random.default_rng(0).integers(0, 256, cnt, dtype=np.uint8).tobytes()
+    path.write_bytes(bytes(raw))
+    dev = open_device("emulator", profile, media_path=str(tmp_path / "m.tif"))
+    job = PrintJob(dev, RipJob(str(path), RipSettings(), profile))
+    with pytest.raises(JobError, match="late.tif: corrupt TIFF data"):
+        job.run()
+    assert job.report.state == "failed" and job.report.passes_printed > 0
+    from wideprint.driver import protocol as P
+    assert dev.emulator.fpga.we_en is False and not dev.emulator.busy()
+    good = write_cmyk_tiff(tmp_path / "good.tif", random_planes(100, 80, seed=18))
+    dev.emulator.media_path = str(tmp_path / "m2.tif")
+    PrintJob(dev, RipJob(str(good), RipSettings(), profile), job_id=2).run()
+    dev.emulator.close()
+    assert np.array_equal(read_planes(tmp_path / "m2.tif"), random_planes(100, 80, seed=18))
