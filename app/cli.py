@@ -28,6 +28,19 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--intent", default="relative",
                    choices=("perceptual", "relative", "saturation", "absolute"))
     p.add_argument("--profile", metavar="TOML", help="printer profile (default: resources/printers/default.toml)")
+    g = p.add_argument_group("placement (docs/placement.md)")
+    g.add_argument("--size", choices=("physical", "pixels"), default="physical",
+                   help="physical: from the file's resolution (300 ppi if absent); "
+                        "pixels: 1 image pixel = 1 device dot")
+    g.add_argument("--width-mm", type=float, help="print this wide (keeps the aspect ratio)")
+    g.add_argument("--height-mm", type=float, help="print this high")
+    g.add_argument("--scale", type=float, help="multiply the physical size")
+    g.add_argument("--fit-width-mm", type=float, help="scale to exactly this width")
+    g.add_argument("--rotate", type=int, choices=(0, 90, 180, 270), default=0,
+                   help="degrees clockwise")
+    g.add_argument("--mirror", action="store_true", help="mirror (backlit film)")
+    g.add_argument("--filter", default="lanczos3", choices=("nearest", "linear", "cubic", "lanczos3"),
+                   help="resampling filter")
 
 
 def _emulator_outputs(p: argparse.ArgumentParser) -> None:
@@ -70,7 +83,12 @@ def _close_device(dev, args) -> None:
 
 def _settings(args):
     from ..rip.pipeline import RipSettings
-    return RipSettings(dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
+    from ..rip.place import Placement
+    placement = Placement(size=args.size, width_mm=args.width_mm, height_mm=args.height_mm,
+                          scale=args.scale, fit_width_mm=args.fit_width_mm, rotate=args.rotate,
+                          mirror=args.mirror, filter=args.filter)
+    placement.check()
+    return RipSettings(placement=placement, dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
                        pass_mask=args.pass_mask,
                        ink_limit=args.ink_limit, input_icc=args.input_icc,
                        output_icc=args.output_icc, intent=args.intent)
@@ -348,6 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
+
+    from .server_cli import add_parser as add_server_parsers
+    add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, status, report
 
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)

@@ -16,6 +16,7 @@ import numpy as np
 from .color import Separator
 from .halftone import METHODS, Halftoner
 from .load import ImageSource, open_image
+from .place import Placement, place
 from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
 from .swath import PassData, PassPlanner
@@ -33,11 +34,13 @@ class RipSettings:
     output_icc: str | None = None
     intent: str = "relative"
     band_rows: int = 256
+    placement: Placement = field(default_factory=Placement)   # physical size by default
 
     def check(self, profile: Profile) -> None:
         if self.dither not in METHODS:
             raise ValueError(f"dither must be one of {', '.join(METHODS)}, not {self.dither!r}")
         profile.k(self.dpi)
+        self.placement.check()
 
 
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:
@@ -132,15 +135,22 @@ class PrintableJob:
 
 @dataclass
 class RipJob(PrintableJob):
-    """One file ripped for one printer: the image area in device dots and the passes.
-    1 image pixel = 1 device dot (columns at the dpi mode, rows at the profile's row pitch)."""
+    """One file ripped for one printer: the image placed on the device grid (columns at the
+    dpi mode, rows at the profile's row pitch; rip/place.py), halftoned, planned into passes."""
     path: str
     settings: RipSettings = field(default_factory=RipSettings)
     profile: Profile = field(default_factory=load_profile)
 
     def __post_init__(self):
         self.settings.check(self.profile)
-        self.source: ImageSource = open_image(self.path)
+        loaded = open_image(self.path)
+        try:
+            # the image area on the device grid: physical size, scaled, rotated, mirrored
+            self.source: ImageSource = place(loaded, self.settings.placement, self.settings.dpi,
+                                             self.profile.row_um)
+        except ValueError as exc:
+            loaded.close()
+            raise ValueError(f"{self.path}: {exc}") from None
         self.width, self.height = self.source.width, self.source.height
 
     @property

@@ -32,7 +32,7 @@ import os
 import shutil
 import tempfile
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Iterator
 
 import numpy as np
@@ -54,7 +54,7 @@ DEFAULT_PPI = 300.0
 SPOOL_TILE = 128
 #: rows pulled from libvips per fetch: libvips' sequential line caches grow with the largest
 #: request, so small fetches keep memory low (the bands are re-cut to the caller's height)
-VIPS_FETCH_ROWS = 8
+VIPS_FETCH_ROWS = 16
 #: free space left on the temporary file system after a spool is written
 DISK_RESERVE = 64 << 20
 MM_PER_INCH = 25.4
@@ -267,7 +267,7 @@ class PlacedSource:
     def __init__(self, source: ImageSource, placement: Placement, dpi: int, row_um: float,
                  width: int, height: int, tmp_dir: str | None = None):
         self.source = source
-        self.placement = placement
+        self.placement = replace(placement)  # a copy: later edits by the caller change nothing
         self.dpi = int(dpi)
         self.row_um = float(row_um)
         self.path = source.path
@@ -408,13 +408,16 @@ class PlacedSource:
     def _scaled(self, rows: int) -> Iterator[np.ndarray]:
         """The resampled (not rotated, not mirrored) image in bands of `rows` rows."""
         if not self.resample:
-            yield from self.source.bands(rows)
+            if rows > VIPS_FETCH_ROWS and getattr(self.source, "format", "") != "bmp":
+                # libvips-backed loaders keep line caches sized by the largest request
+                yield from _reband(self.source.bands(VIPS_FETCH_ROWS), rows)
+            else:
+                yield from self.source.bands(rows)
         else:
             yield from _reband(self._resampled(), rows)
 
     def _resampled(self) -> Iterator[np.ndarray]:
-        """The resampled image in chunks of VIPS_FETCH_ROWS rows."""
-        rows = VIPS_FETCH_ROWS
+        """The resampled image in chunks of VIPS_FETCH_ROWS rows, pulled top to bottom."""
         import pyvips
 
         src = self.source
@@ -434,7 +437,7 @@ class PlacedSource:
             raise ImageError(self.path, _vips_problem(fmt, str(e), self.path)) from None
         dtype = self.dtype
         c = self.channels
-        step = max(1, min(rows, VIPS_FETCH_ROWS))
+        step = max(1, int(VIPS_FETCH_ROWS))
         y = 0
         while y < sh:
             n = min(step, sh - y)

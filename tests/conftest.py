@@ -13,6 +13,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 ROOT = Path(__file__).resolve().parent.parent
 
+from wideprint.rip.place import Placement  # noqa: E402
+
+# 1 image pixel = 1 device dot: the placement for tests that compare the media with the
+# planes they wrote (a physical-size placement resamples them)
+PX = Placement(size="pixels")
+
 
 @pytest.fixture(scope="session")
 def profile():
@@ -20,9 +26,16 @@ def profile():
     return load_profile()
 
 
+# the default profile's device grid at 300 dpi: 300 columns and 25400 / 68.55 rows per inch
+DEVICE_PPI = (300.0, 25400 / 68.55)
+
+
 def write_cmyk_tiff(path, planes01: np.ndarray) -> Path:
-    """A CMYK TIFF whose channels hold only 0 and 255, from 0/1 planes (h, w, 4)."""
-    tifffile.imwrite(path, (planes01 * 255).astype(np.uint8), photometric="separated")
+    """A CMYK TIFF whose channels hold only 0 and 255, from 0/1 planes (h, w, 4), tagged
+    with the 300 dpi device grid's resolution, so that even a physical-size placement
+    prints it 1 pixel = 1 dot."""
+    tifffile.imwrite(path, (planes01 * 255).astype(np.uint8), photometric="separated",
+                     resolution=DEVICE_PPI, resolutionunit="INCH")
     return Path(path)
 
 

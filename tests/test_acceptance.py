@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, random_planes, write_cmyk_tiff
+from conftest import PX, ROOT, random_planes, write_cmyk_tiff
 from wideprint.driver.device import open_device
 from wideprint.driver.job import JobError, PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
@@ -31,7 +31,7 @@ def test_binary_cmyk_tiff_prints_bit_exact(tmp_path, profile, dpi, passes, bidir
     planes = random_planes(700, 333, density=0.35, seed=dpi + passes)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
     media = tmp_path / "media.tif"
-    rep, emu = print_on_emulator(src, RipSettings(dpi=dpi, passes=passes, bidir=bidir),
+    rep, emu = print_on_emulator(src, RipSettings(placement=PX, dpi=dpi, passes=passes, bidir=bidir),
                                  profile, media)
     got = read_planes(media)
     assert got.shape == planes.shape
@@ -45,7 +45,7 @@ def test_sparse_image_skips_blank_passes_and_still_matches(tmp_path, profile):
     planes[10:20, 5:50, 0] = 1           # a cyan bar at the top
     planes[1400:1450, 150:190, 3] = 1    # a black bar near the bottom
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    rep, emu = print_on_emulator(src, RipSettings(passes=2, bidir=True), profile,
+    rep, emu = print_on_emulator(src, RipSettings(placement=PX, passes=2, bidir=True), profile,
                                  tmp_path / "m.tif")
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
     assert rep.passes_skipped > 0 and rep.passes_printed < rep.passes_total
@@ -55,7 +55,7 @@ def test_job_wider_than_paper_is_refused_before_printing(tmp_path, profile):
     from wideprint.device_sim.faults import Faults
     src = write_cmyk_tiff(tmp_path / "wide.tif", random_planes(20, 1300, seed=3))
     with pytest.raises(JobError, match="wide.tif.*wide at 300 dpi but the paper is 100 mm"):
-        print_on_emulator(src, RipSettings(), profile, tmp_path / "m.tif",
+        print_on_emulator(src, RipSettings(placement=PX), profile, tmp_path / "m.tif",
                           Faults(paper_width_mm=100))
 
 
@@ -80,7 +80,8 @@ def test_cli_bad_file_fails_its_job_and_the_next_prints(tmp_path):
     good = write_cmyk_tiff(tmp_path / "good.tif", random_planes(50, 40, seed=9))
     exe = [sys.executable, "-m", "wideprint.app.cli"]
     r = subprocess.run(exe + ["print", str(bad), str(good), "--media-out",
-                              str(tmp_path / "m.tif"), "--json"], capture_output=True, text=True)
+                              str(tmp_path / "m.tif"), "--json", "--size", "pixels"],
+                       capture_output=True, text=True)
     assert r.returncode == 1
     assert "bad.tif" in r.stderr
     reports = json.loads(r.stdout)
@@ -103,7 +104,7 @@ def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
     raw[off:off + cnt] = np.random.default_rng(0).integers(0, 256, cnt, dtype=np.uint8).tobytes()
     path.write_bytes(bytes(raw))
     dev = open_device("emulator", profile, media_path=str(tmp_path / "m.tif"))
-    job = PrintJob(dev, RipJob(str(path), RipSettings(), profile))
+    job = PrintJob(dev, RipJob(str(path), RipSettings(placement=PX), profile))
     with pytest.raises(JobError, match="late.tif: corrupt TIFF data"):
         job.run()
     assert job.report.state == "failed" and job.report.passes_printed > 0
@@ -111,6 +112,6 @@ def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
     assert dev.emulator.fpga.we_en is False and not dev.emulator.busy()
     good = write_cmyk_tiff(tmp_path / "good.tif", random_planes(100, 80, seed=18))
     dev.emulator.media_path = str(tmp_path / "m2.tif")
-    PrintJob(dev, RipJob(str(good), RipSettings(), profile), job_id=2).run()
+    PrintJob(dev, RipJob(str(good), RipSettings(placement=PX), profile), job_id=2).run()
     dev.emulator.close()
     assert np.array_equal(read_planes(tmp_path / "m2.tif"), random_planes(100, 80, seed=18))

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from conftest import PX, random_planes, write_cmyk_tiff
 from wideprint.driver.device import open_device
 from wideprint.driver.job import JobCancelled, JobError, PrintJob
 from wideprint.driver import protocol as P
@@ -19,7 +19,7 @@ def make_job(tmp_path, profile, on_event=None, rows=900):
     planes = random_planes(rows, 300, seed=31)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
     dev = open_device("emulator", profile, media_path=str(tmp_path / "m.tif"))
-    job = PrintJob(dev, RipJob(str(src), RipSettings(passes=2), profile), on_event=on_event)
+    job = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), on_event=on_event)
     return job, dev, planes
 
 

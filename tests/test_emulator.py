@@ -6,7 +6,7 @@ import struct
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from conftest import PX, random_planes, write_cmyk_tiff
 from wideprint.device_sim.endpoints import in_process
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.printer import Printer
@@ -29,7 +29,7 @@ def run(job, profile, media, faults=None, machine=None, **kw):
 
 def pattern(kind, profile, width_cols=600, dpi=150, **kw):
     planes = make_pattern(kind, profile, width_cols, **kw)
-    return PatternJob(kind, planes, RipSettings(dpi=dpi, passes=1), profile), planes
+    return PatternJob(kind, planes, RipSettings(placement=PX, dpi=dpi, passes=1), profile), planes
 
 
 def connected(printer=None):
@@ -162,7 +162,7 @@ def test_device_faults_stop_the_job_with_a_clear_message(tmp_path, profile, faul
     planes = random_planes(600, 2000, seed=5)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
     with pytest.raises(JobError, match=pattern_text):
-        run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif", faults)
+        run(RipJob(str(src), RipSettings(placement=PX), profile), profile, tmp_path / "m.tif", faults)
 
 
 def test_overspeed_is_refused_by_the_driver_and_caught_by_the_device(tmp_path, profile):
@@ -177,7 +177,7 @@ def test_overspeed_is_refused_by_the_driver_and_caught_by_the_device(tmp_path, p
 def test_serial_noise_is_retried_and_the_print_is_still_exact(tmp_path, profile):
     planes = random_planes(500, 300, seed=8)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    rep, emu = run(RipJob(str(src), RipSettings(passes=2, bidir=True), profile), profile,
+    rep, emu = run(RipJob(str(src), RipSettings(placement=PX, passes=2, bidir=True), profile), profile,
                    tmp_path / "m.tif", Faults(serial_byte_error=1e-3, seed=4))
     assert rep.retries > 0
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
@@ -186,7 +186,7 @@ def test_serial_noise_is_retried_and_the_print_is_still_exact(tmp_path, profile)
 def test_fifo_levels_and_min_level_are_reported(tmp_path, profile):
     planes = random_planes(300, 400, seed=2)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    rep, emu = run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif",
+    rep, emu = run(RipJob(str(src), RipSettings(placement=PX), profile), profile, tmp_path / "m.tif",
                    Faults(host_jitter="typical"))
     lines = [e for e in emu.events if e["event"] == "line"]
     assert lines and all(0 <= e["min_fifo_words"] <= profile.fifo_words for e in lines)
@@ -197,7 +197,7 @@ def test_starved_line_pauses_and_resumes_with_every_dot_in_place(tmp_path, profi
     """The same starving host as the underrun fault above, with the starve guard on."""
     planes = random_planes(600, 2000, seed=5)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    rep, emu = run(RipJob(str(src), RipSettings(), profile), profile, tmp_path / "m.tif",
+    rep, emu = run(RipJob(str(src), RipSettings(placement=PX), profile), profile, tmp_path / "m.tif",
                    Faults(fifo_words=128, host_jitter="loaded", seed=3))
     pauses = sum(e["pauses"] for e in emu.events if e["event"] == "line")
     assert pauses > 0
@@ -226,11 +226,11 @@ def test_bidir_alignment_finds_and_fixes_the_offset(tmp_path, profile):
     assert fixed.bidir_offset_columns[300] == 2
     planes = random_planes(700, 200, seed=12)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    run(RipJob(str(src), RipSettings(passes=2, bidir=True), fixed), fixed, tmp_path / "m.tif",
+    run(RipJob(str(src), RipSettings(placement=PX, passes=2, bidir=True), fixed), fixed, tmp_path / "m.tif",
         machine)
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
     # and the uncalibrated profile on the same machine does not print exactly
-    run(RipJob(str(src), RipSettings(passes=2, bidir=True), profile), profile,
+    run(RipJob(str(src), RipSettings(placement=PX, passes=2, bidir=True), profile), profile,
         tmp_path / "bad.tif", Faults(bidir_error=2))
     assert not np.array_equal(read_planes(tmp_path / "bad.tif"), planes)
 
@@ -259,6 +259,6 @@ def test_head_alignment_finds_a_misplaced_head(tmp_path, profile):
     fixed = save_calibration(copy, head_x_counts={"M1": m1.x_counts + 12})
     planes = random_planes(300, 200, seed=13)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    run(RipJob(str(src), RipSettings(), fixed), fixed, tmp_path / "m.tif", machine,
+    run(RipJob(str(src), RipSettings(placement=PX), fixed), fixed, tmp_path / "m.tif", machine,
         machine=profile)
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)

@@ -4,7 +4,7 @@ no pass printed twice, none missing (issue 5)."""
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from conftest import PX, random_planes, write_cmyk_tiff
 from wideprint.device_sim.faults import Faults
 from wideprint.driver.device import open_device
 from wideprint.driver.job import PrintJob
@@ -17,7 +17,7 @@ def print_job(tmp_path, profile, faults, settings=None, planes=None, spec="emula
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
     dev = open_device(spec, profile, faults, media_path=str(tmp_path / "m.tif"))
     try:
-        rep = PrintJob(dev, RipJob(str(src), settings or RipSettings(passes=2, bidir=True),
+        rep = PrintJob(dev, RipJob(str(src), settings or RipSettings(placement=PX, passes=2, bidir=True),
                                    profile)).run()
     finally:
         dev.emulator.close()
@@ -63,12 +63,12 @@ def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile
             checkpoints.append(kw["checkpoint"])
             if kw["checkpoint"].get("next_pass") == 4:
                 first.control.cancel()           # the host "dies" between passes
-    first = PrintJob(dev, RipJob(str(src), RipSettings(passes=2), profile), on_event=on_event)
+    first = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), on_event=on_event)
     with pytest.raises(JobCancelled):
         first.run()
     cp = checkpoints[-1]
     assert cp["next_pass"] == 4
-    again = PrintJob(dev, RipJob(str(src), RipSettings(passes=2), profile), resume=cp)
+    again = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), resume=cp)
     rep = again.run()
     dev.emulator.close()
     assert rep.state == "done"

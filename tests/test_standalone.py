@@ -42,7 +42,7 @@ def test_print_through_standalone_emulator(tmp_path, serial, data):
         planes = random_planes(400, 260, seed=11)
         src = write_cmyk_tiff(tmp_path / "in.tif", planes)
         r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", str(src),
-                            "--device", spec, "--passes", "2", "--bidir"],
+                            "--device", spec, "--passes", "2", "--bidir", "--size", "pixels"],
                            capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr + "\n--- emulator ---\n" + (
             proc.terminate() or proc.communicate(timeout=10)[1])

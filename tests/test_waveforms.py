@@ -4,7 +4,7 @@ cycles) and the words each head latched, compared with the RIP's, for every pass
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from conftest import PX, random_planes, write_cmyk_tiff
 from wideprint.driver.device import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
@@ -46,7 +46,7 @@ def test_vcd_configuration_trace_and_print_cycle(tmp_path, profile):
     vcd = tmp_path / "w.vcd"
     k1 = next(h.index for h in profile.heads if h.name == "K1")
     planes = make_pattern("sawtooth", profile, 400)
-    job = PatternJob("sawtooth", planes, RipSettings(dpi=150), profile)
+    job = PatternJob("sawtooth", planes, RipSettings(placement=PX, dpi=150), profile)
     dev = open_device("emulator", profile, vcd_path=str(vcd), vcd_window=(0, k1, 100, 3),
                       record_latched=True)
     PrintJob(dev, job).run()
@@ -86,7 +86,7 @@ def test_vcd_configuration_trace_and_print_cycle(tmp_path, profile):
 def test_head_bit_streams_equal_the_rip_words(tmp_path, profile, dpi, passes, bidir):
     planes = random_planes(400, 150, seed=passes)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
-    settings = RipSettings(dpi=dpi, passes=passes, bidir=bidir)
+    settings = RipSettings(placement=PX, dpi=dpi, passes=passes, bidir=bidir)
     expected = {pd.index: pd.words for pd in RipJob(str(src), settings, profile).passes()}
     dev = open_device("emulator", profile, record_latched=True)
     PrintJob(dev, RipJob(str(src), settings, profile)).run()

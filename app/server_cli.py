@@ -1,0 +1,478 @@
+"""The print server's command line (docs/server.md): `serve`, and the clients of its local
+API — `submit`, `queue`, `cancel`, `hold`, `release`, `status`, `report` — plus
+`progress()`, a text progress bar for batch commands.
+
+app/cli.py calls `add_parser(sub)`; `python -m wideprint.app.server_cli ...` runs these
+commands on their own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from urllib.parse import urlsplit
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SERVER = 0, 1, 2, 3
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status = status
+
+
+class Client:
+    """A client of the local API: finds the server (server.json) and its token in the
+    state directory."""
+
+    def __init__(self, state_dir: str | os.PathLike | None = None, url: str | None = None,
+                 token: str | None = None, timeout: float = 60.0):
+        from ..driver.server import SERVER_FILE, TOKEN_FILE, default_state_dir
+        self.state_dir = Path(state_dir) if state_dir else default_state_dir()
+        if url is None:
+            try:
+                url = json.loads((self.state_dir / SERVER_FILE).read_text())["url"]
+            except (OSError, ValueError, KeyError):
+                raise ApiError(0, f"no wideprint server running for {self.state_dir} "
+                               f"(no {SERVER_FILE}; start `wideprint serve`)") from None
+        if token is None:
+            try:
+                token = (self.state_dir / TOKEN_FILE).read_text().strip()
+            except OSError as exc:
+                raise ApiError(0, f"cannot read the API token in {self.state_dir}: "
+                               f"{exc.strerror}") from None
+        u = urlsplit(url)
+        self.host, self.port = u.hostname, u.port
+        self.token, self.timeout = token, timeout
+        self._conn: http.client.HTTPConnection | None = None
+
+    def _connection(self) -> http.client.HTTPConnection:
+        if self._conn is None:
+            self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
+        return self._conn
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+    def request(self, method: str, path: str, body=None, headers: dict | None = None,
+                raw: bool = False):
+        hdrs = {"Authorization": f"Bearer {self.token}"}
+        hdrs.update(headers or {})
+        if isinstance(body, (dict, list)):
+            body = json.dumps(body).encode()
+            hdrs["Content-Type"] = "application/json"
+        for attempt in (0, 1):
+            conn = self._connection()
+            try:
+                try:
+                    conn.request(method, path, body=body, headers=hdrs)
+                except (BrokenPipeError, ConnectionResetError):
+                    # the server refused the upload before reading it (401, 413, 400) and
+                    # closed: its answer is usually waiting in the socket
+                    if not hasattr(body, "read") and not isinstance(body, bytes):
+                        raise
+                resp = conn.getresponse()
+                data = resp.read()
+                break
+            except (ConnectionError, http.client.HTTPException, OSError) as exc:
+                self.close()
+                # a kept-alive connection the server closed: one retry for requests that
+                # cannot do harm twice (uploads carry an idempotency key)
+                if attempt or hasattr(body, "read"):
+                    raise ApiError(0, f"cannot reach the wideprint server at "
+                                   f"{self.host}:{self.port}: {exc}") from None
+        if resp.getheader("Connection", "").lower() == "close":
+            self.close()
+        if raw and resp.status < 400:
+            return data.decode()
+        try:
+            obj = json.loads(data) if data else {}
+        except ValueError:
+            obj = {"error": data.decode(errors="replace")}
+        if resp.status >= 400:
+            raise ApiError(resp.status, obj.get("error", f"HTTP {resp.status}"))
+        return obj
+
+    # endpoints
+    def submit(self, path: str | os.PathLike, name: str | None = None, **fields) -> dict:
+        """Upload a file as a job: fields are preset, copies, priority, hold, key, client,
+        settings ({dpi, passes, bidir, dither, intent, ink_limit, input_icc, output_icc})."""
+        path = Path(path)
+        desc = {"name": name or path.name}
+        desc.update({k: v for k, v in fields.items() if v is not None})
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            return self.request("POST", "/v1/jobs", body=f, headers={
+                "X-Wideprint-Job": json.dumps(desc), "Content-Length": str(size),
+                "Content-Type": "application/octet-stream"})
+
+    def submit_bytes(self, data: bytes, name: str, **fields) -> dict:
+        desc = {"name": name}
+        desc.update({k: v for k, v in fields.items() if v is not None})
+        return self.request("POST", "/v1/jobs", body=data, headers={
+            "X-Wideprint-Job": json.dumps(desc), "Content-Type": "application/octet-stream"})
+
+    def jobs(self, states: str | None = None) -> list[dict]:
+        return self.request("GET", "/v1/jobs" + (f"?state={states}" if states else ""))["jobs"]
+
+    def job(self, job_id: int) -> dict:
+        return self.request("GET", f"/v1/jobs/{job_id}")["job"]
+
+    def action(self, job_id: int, what: str) -> dict:
+        return self.request("POST", f"/v1/jobs/{job_id}/{what}")["job"]
+
+    def status(self) -> dict:
+        return self.request("GET", "/v1/status")
+
+    def pause_queue(self, paused: bool) -> dict:
+        return self.request("POST", "/v1/queue", body={"paused": paused})
+
+    def report_csv(self, job_id: int | None = None) -> str:
+        return self.request("GET", "/v1/report?format=csv" + (f"&job={job_id}" if job_id else ""),
+                            raw=True)
+
+    def report(self, job_id: int | None = None) -> list[dict]:
+        return self.request("GET", "/v1/report" + (f"?job={job_id}" if job_id else ""))["prints"]
+
+    def wait(self, job_id: int, timeout: float = 300.0, poll: float = 0.2) -> dict:
+        deadline = time.monotonic() + timeout
+        while True:
+            job = self.job(job_id)
+            if job["state"] in ("done", "failed", "cancelled") or time.monotonic() > deadline:
+                return job
+            time.sleep(poll)
+
+
+# -- progress bar -------------------------------------------------------------------------------
+def progress(done: float, total: float, label: str = "", width: int = 30, stream=None,
+             final: bool = False) -> str:
+    """Draw `[#####-----]  3/10  label` on one line of `stream` (default stderr; nothing
+    is drawn when it is not a terminal); returns the line.  Call with final=True (or
+    done == total) to end the line."""
+    stream = sys.stderr if stream is None else stream
+    frac = 0.0 if total <= 0 else max(0.0, min(1.0, done / total))
+    filled = int(round(frac * width))
+    num = f"{done:g}/{total:g}" if total else f"{done:g}"
+    line = f"[{'#' * filled}{'-' * (width - filled)}] {frac * 100:5.1f}%  {num}" + \
+        (f"  {label}" if label else "")
+    if getattr(stream, "isatty", lambda: False)():
+        cols = 100
+        try:
+            cols = os.get_terminal_size(stream.fileno()).columns
+        except (OSError, ValueError, AttributeError):
+            pass
+        stream.write("\r" + line[:cols - 1].ljust(cols - 1))
+        if final or (total and done >= total):
+            stream.write("\n")
+        stream.flush()
+    return line
+
+
+# -- commands -------------------------------------------------------------------------------------
+def _client(args) -> Client:
+    return Client(args.state_dir, url=getattr(args, "url", None))
+
+
+def _fail(cmd: str, exc: Exception) -> int:
+    print(f"wideprint {cmd}: {exc}", file=sys.stderr)
+    if isinstance(exc, ApiError) and exc.status == 0:
+        return EXIT_SERVER
+    return EXIT_FAILED
+
+
+def cmd_serve(args) -> int:
+    import logging
+    from ..driver.server import ServerConfig, default_state_dir, serve
+    logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose_server else logging.INFO)
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.WARNING,
+                            format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if args.max_file_size is not None and args.max_file_size <= 0:
+        print("wideprint serve: --max-file-size must be positive", file=sys.stderr)
+        return EXIT_USAGE
+    cfg = ServerConfig(device=args.device, state_dir=Path(args.state_dir or default_state_dir()),
+                       media_dir=Path(args.media_dir) if args.media_dir else None,
+                       hot_folder_root=Path(args.hot_folder_root) if args.hot_folder_root else None,
+                       host=args.host, port=args.port, on_crash=args.on_crash,
+                       scan_interval=args.scan_interval, start_paused=args.paused,
+                       profile_path=args.profile)
+    if args.max_file_size is not None:
+        cfg.max_file_bytes = args.max_file_size
+    try:
+        return serve(cfg)
+    except (ValueError, OSError) as exc:
+        print(f"wideprint serve: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+def _settings_from(args) -> dict:
+    s = {}
+    for key in ("dpi", "passes", "bidir", "dither", "intent", "ink_limit", "input_icc",
+                "output_icc"):
+        v = getattr(args, key, None)
+        if v is not None:
+            s[key] = v
+    return s
+
+
+def _expand(files: list[str]) -> list[Path]:
+    out = []
+    for f in files:
+        p = Path(f)
+        if p.is_dir():
+            out += sorted(c for c in p.iterdir() if c.is_file() and not c.name.startswith("."))
+        else:
+            out.append(p)
+    return out
+
+
+def cmd_submit(args) -> int:
+    try:
+        client = _client(args)
+    except ApiError as exc:
+        return _fail("submit", exc)
+    files = _expand(args.files)
+    results, failed = [], 0
+    for i, f in enumerate(files):
+        try:
+            r = client.submit(f, preset=args.preset, copies=args.copies, priority=args.priority,
+                              hold=args.hold or None, settings=_settings_from(args) or None,
+                              client=args.client)
+            job = r["job"]
+            results.append(job)
+            if not args.json:
+                print(f"{f}: job {job['id']} {job['state']}"
+                      + (" (already submitted)" if r.get("duplicate") else ""))
+        except ApiError as exc:
+            failed += 1
+            results.append({"file": str(f), "error": str(exc)})
+            print(f"{f}: REFUSED: {exc}", file=sys.stderr)
+            if exc.status == 0:
+                return EXIT_SERVER
+        except OSError as exc:
+            failed += 1
+            results.append({"file": str(f), "error": exc.strerror})
+            print(f"{f}: {exc.strerror}", file=sys.stderr)
+        if len(files) > 3 and not args.json:
+            progress(i + 1, len(files), f.name)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    if args.wait and not failed:
+        for job in results:
+            done = client.wait(job["id"], timeout=args.wait)
+            print(f"job {done['id']}: {done['state']}" + (f": {done['message']}" if done["message"] else ""),
+                  file=sys.stderr if args.json else sys.stdout)
+            if done["state"] != "done":
+                failed += 1
+    return EXIT_FAILED if failed else EXIT_OK
+
+
+def _age(t: float | None) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t)) if t else ""
+
+
+def cmd_queue(args) -> int:
+    try:
+        client = _client(args)
+        states = None if args.all else "queued,held,printing"
+        if args.state:
+            states = args.state
+        jobs = client.jobs(states)
+    except ApiError as exc:
+        return _fail("queue", exc)
+    if args.json:
+        print(json.dumps(jobs, indent=2))
+        return EXIT_OK
+    if not jobs:
+        print("the queue is empty" + ("" if args.all else " (--all shows finished jobs)"))
+        return EXIT_OK
+    print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'PASSES':>9} {'COPIES':>6} "
+          f"{'PRESET':10} {'SOURCE':12} {'SUBMITTED':9} NAME / MESSAGE")
+    for j in jobs:
+        passes = f"{j['passes_done']}/{j['passes_total']}" if j["passes_total"] else ""
+        print(f"{j['id']:>6} {j['state']:9} {j.get('position') or '':>4} {j['priority']:>4} "
+              f"{passes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
+              f"{j['source']:12.12} {_age(j['submitted']):9} {j['name']}"
+              + (f"  [{j['message']}]" if j["message"] else ""))
+    return EXIT_OK
+
+
+def _job_action(what: str):
+    def cmd(args) -> int:
+        try:
+            client = _client(args)
+            rc = EXIT_OK
+            for job_id in args.ids:
+                try:
+                    job = client.action(job_id, what)
+                    print(f"job {job['id']}: {job['state']}"
+                          + (f" ({job['message']})" if job["message"] else ""))
+                except ApiError as exc:
+                    if exc.status == 0:
+                        raise
+                    print(f"wideprint {what}: {exc}", file=sys.stderr)
+                    rc = EXIT_FAILED
+            return rc
+        except ApiError as exc:
+            return _fail(what, exc)
+    return cmd
+
+
+def cmd_status(args) -> int:
+    try:
+        client = _client(args)
+        if args.pause or args.resume:
+            client.pause_queue(bool(args.pause))
+        st = client.status()
+    except ApiError as exc:
+        return _fail("status", exc)
+    if args.json:
+        print(json.dumps(st, indent=2))
+        return EXIT_OK
+    s, q, p, cur = st["server"], st["queue"], st["printer"], st["current"]
+    print(f"server   {s['url']}  pid {s['pid']}  up {time.time() - s['started']:.0f} s  "
+          f"device {s['device']}  on crash: {s['on_crash']}")
+    print(f"printer  {p['state']}" + (f": {p['error']}" if p["error"] else ""))
+    counts = ", ".join(f"{k} {v}" for k, v in q["counts"].items())
+    print(f"queue    {'PAUSED (' + q['reason'] + ')' if q['paused'] else 'running'}; {counts}")
+    if cur:
+        print(f"current  job {cur['id']} {cur['name']}: {cur['state']}"
+              f"{' ' + cur['detail'] if cur['detail'] else ''}, pass "
+              f"{cur['passes_printed']}/{cur['passes_total']}, copy {cur['copy']}/{cur['copies']}"
+              + (" (resumed)" if cur.get("resumed") else ""))
+    return EXIT_OK
+
+
+def cmd_report(args) -> int:
+    try:
+        client = _client(args)
+        text = client.report_csv(args.job)
+    except ApiError as exc:
+        return _fail("report", exc)
+    if args.csv:
+        Path(args.csv).write_text(text)
+        print(f"{args.csv}: {text.count(chr(10)) - 1} prints")
+        return EXIT_OK
+    if args.json:
+        print(json.dumps(client.report(args.job), indent=2))
+        return EXIT_OK
+    import csv
+    import io
+    rows = list(csv.DictReader(io.StringIO(text)))
+    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'PASSES':>7} {'M2':>9} {'INK ML':>10} "
+          f"{'SECONDS':>8}  FILE")
+    for r in rows:
+        print(f"{r['job_id']:>5} {r['copy']:>4} {r['outcome']:9} "
+              f"{r['passes_printed'] + '/' + r['passes_total']:>7} {float(r['area_m2']):9.4f} "
+              f"{float(r['ink_total_ml']):10.5f} {float(r['duration_s']):8.1f}  {r['file']}")
+    return EXIT_OK
+
+
+# -- parsers -------------------------------------------------------------------------------------
+def _state_dir_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--state-dir", metavar="DIR",
+                   help="the server's state directory (default $WIDEPRINT_STATE_DIR, "
+                        "/var/lib/wideprint for root, else ~/.local/state/wideprint)")
+
+
+def _client_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
+    p = sub.add_parser(name, help=help)
+    _state_dir_option(p)
+    p.add_argument("--url", help=argparse.SUPPRESS)
+    return p
+
+
+def add_parser(sub) -> None:
+    """Add serve, submit, queue, cancel, hold, release, status and report to the
+    `wideprint` command's subparsers."""
+    from ..driver.server import DEFAULT_PORT
+    from ..rip.halftone import METHODS
+
+    p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
+    p.add_argument("--device", default="emulator",
+                   help="'emulator' (in-process) or serial=PORT,data=URL (docs/driver.md)")
+    _state_dir_option(p)
+    p.add_argument("--media-dir", metavar="DIR",
+                   help="in-process emulator: write each job's media as DIR/job-ID.tif")
+    p.add_argument("--hot-folder-root", metavar="DIR",
+                   help="watch DIR/PRESET/ for every preset (files there become jobs)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address of the API (default 127.0.0.1; anything else exposes it)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"API port (default {DEFAULT_PORT}; 0 = any free port)")
+    p.add_argument("--on-crash", choices=("resume", "hold"), default="resume",
+                   help="a job that was printing when the server died: resume it at its "
+                        "first unfinished pass (default), or hold it for the operator")
+    p.add_argument("--max-file-size", type=int, metavar="BYTES",
+                   help="largest file accepted (default 4 GiB)")
+    p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",
+                   help="hot-folder scan interval (default 1 s)")
+    p.add_argument("--paused", action="store_true",
+                   help="start with the queue paused (jobs are accepted, none printed)")
+    p.add_argument("--profile", metavar="TOML", help="printer profile")
+    p.add_argument("--verbose-server", action="store_true", help="debug logging")
+    p.set_defaults(func=cmd_serve)
+
+    p = _client_parser(sub, "submit", "send files to the print server's queue")
+    p.add_argument("files", nargs="+", metavar="FILE", help="images or folders")
+    p.add_argument("--preset", help="settings preset (the server's presets file)")
+    p.add_argument("--copies", type=int)
+    p.add_argument("--priority", type=int, help="-100..100, higher prints first (default 0)")
+    p.add_argument("--hold", action="store_true", help="queue the job held")
+    p.add_argument("--client", help="a tag for the accounting (default: none)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--wait", type=float, nargs="?", const=3600.0, metavar="S",
+                   help="wait until the jobs have printed (exit 1 if any did not)")
+    p.add_argument("--dither", choices=METHODS)
+    p.add_argument("--passes", type=int, choices=(1, 2, 3, 4, 6, 8))
+    p.add_argument("--bidir", action=argparse.BooleanOptionalAction, default=None)
+    p.add_argument("--dpi", type=int, choices=(150, 300, 600))
+    p.add_argument("--ink-limit", type=float, metavar="PERCENT")
+    p.add_argument("--input-icc", metavar="NAME", help="an ICC profile in the server's icc/ folder")
+    p.add_argument("--output-icc", metavar="NAME", help="an ICC profile in the server's icc/ folder")
+    p.add_argument("--intent", choices=("perceptual", "relative", "saturation", "absolute"))
+    p.set_defaults(func=cmd_submit)
+
+    p = _client_parser(sub, "queue", "list the print server's queue")
+    p.add_argument("--all", action="store_true", help="finished jobs too")
+    p.add_argument("--state", help="only these states, e.g. failed or queued,held")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_queue)
+
+    for name, help in (("cancel", "cancel jobs (a printing job stops at once)"),
+                       ("hold", "hold queued jobs"), ("release", "release held jobs")):
+        p = _client_parser(sub, name, help)
+        p.add_argument("ids", nargs="+", type=int, metavar="ID")
+        p.set_defaults(func=_job_action(name))
+
+    p = _client_parser(sub, "status", "the print server, printer and current job")
+    p.add_argument("--json", action="store_true")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--pause", action="store_true", help="pause the queue (no new job starts)")
+    g.add_argument("--resume", action="store_true", help="resume the queue")
+    p.set_defaults(func=cmd_status)
+
+    p = _client_parser(sub, "report", "accounting: one row per printed copy")
+    p.add_argument("--csv", metavar="FILE", help="write the CSV here")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--job", type=int, metavar="ID")
+    p.set_defaults(func=cmd_report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="wideprint")
+    sub = ap.add_subparsers(dest="command", required=True)
+    add_parser(sub)
+    args = ap.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

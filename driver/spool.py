@@ -1,0 +1,375 @@
+"""The print server's persistent queue (docs/server.md): jobs, their settings, state and
+checkpoint, and the accounting of every print, in one SQLite database (WAL) in the state
+directory; each queued job keeps a private copy of its file in `spool/`.
+
+Every thread uses its own connection (`Spool.db`); state transitions run in
+`BEGIN IMMEDIATE` transactions so two threads never both take the same job.  The database
+is written with `synchronous=FULL`: a job whose submission was answered survives a crash
+of the server and a power cut.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+STATES = ("queued", "held", "printing", "done", "failed", "cancelled")
+ACTIVE = ("queued", "held", "printing")
+FINAL = ("done", "failed", "cancelled")
+COLORS = ("c", "m", "y", "k")
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS jobs (
+    id           INTEGER PRIMARY KEY AUTOINCREMENT,
+    key          TEXT UNIQUE,                 -- client's idempotency key (retries are one job)
+    name         TEXT NOT NULL,               -- file name as submitted (a plain name)
+    source       TEXT NOT NULL,               -- api, hot:PRESET, cups
+    client       TEXT,                        -- free client tag (user, host, CUPS user)
+    spool_path   TEXT,                        -- the private copy (NULL once the job left the queue)
+    size         INTEGER NOT NULL,
+    sha256       TEXT NOT NULL,
+    preset       TEXT,
+    settings     TEXT NOT NULL,               -- JSON: the effective RipSettings fields
+    copies       INTEGER NOT NULL DEFAULT 1,
+    copies_done  INTEGER NOT NULL DEFAULT 0,
+    priority     INTEGER NOT NULL DEFAULT 0,  -- higher first
+    state        TEXT NOT NULL CHECK (state IN ('queued','held','printing','done','failed','cancelled')),
+    interrupted  INTEGER NOT NULL DEFAULT 0,  -- 1: it was printing when the server stopped
+    message      TEXT NOT NULL DEFAULT '',
+    hot_path     TEXT,                        -- hot-folder original, moved to done/ or failed/
+    submitted    REAL NOT NULL,
+    started      REAL,
+    finished     REAL,
+    copy_started REAL,                        -- start of the copy now printing
+    passes_total INTEGER NOT NULL DEFAULT 0,
+    passes_done  INTEGER NOT NULL DEFAULT 0,
+    checkpoint   TEXT                         -- JSON: x0, paper0, next_pass, epoch
+);
+CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
+CREATE TABLE IF NOT EXISTS prints (
+    id             INTEGER PRIMARY KEY AUTOINCREMENT,
+    job_id         INTEGER NOT NULL REFERENCES jobs (id),
+    copy           INTEGER NOT NULL,          -- 1-based
+    file           TEXT NOT NULL,
+    source         TEXT NOT NULL,
+    preset         TEXT,
+    settings       TEXT NOT NULL,
+    started        REAL NOT NULL,
+    ended          REAL NOT NULL,
+    duration_s     REAL NOT NULL,
+    passes_total   INTEGER NOT NULL,
+    passes_printed INTEGER NOT NULL,
+    drops_c INTEGER NOT NULL, drops_m INTEGER NOT NULL,
+    drops_y INTEGER NOT NULL, drops_k INTEGER NOT NULL,
+    ink_c_ml REAL NOT NULL, ink_m_ml REAL NOT NULL,
+    ink_y_ml REAL NOT NULL, ink_k_ml REAL NOT NULL,
+    width_dots     INTEGER NOT NULL,
+    height_rows    INTEGER NOT NULL,
+    area_m2        REAL NOT NULL,
+    outcome        TEXT NOT NULL,             -- done, failed, cancelled
+    message        TEXT NOT NULL DEFAULT '',
+    resumed        INTEGER NOT NULL DEFAULT 0,-- 1: finished after a server restart
+    recoveries     INTEGER NOT NULL DEFAULT 0,
+    retries        INTEGER NOT NULL DEFAULT 0
+);
+CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
+"""
+
+SCHEMA_VERSION = "1"
+
+
+class SpoolError(Exception):
+    """A request the queue refuses (the message says why); `status` is the HTTP code."""
+
+    def __init__(self, message: str, status: int = 409):
+        super().__init__(message)
+        self.status = status
+
+
+def _job_dict(row: sqlite3.Row) -> dict:
+    d = dict(row)
+    d["settings"] = json.loads(d["settings"])
+    cp = d.pop("checkpoint")
+    d["checkpoint"] = json.loads(cp) if cp else None
+    d["interrupted"] = bool(d["interrupted"])
+    return d
+
+
+class Spool:
+    def __init__(self, state_dir: str | os.PathLike):
+        self.state_dir = Path(state_dir)
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        self.spool_dir = self.state_dir / "spool"
+        self.spool_dir.mkdir(exist_ok=True)
+        self.path = self.state_dir / "wideprint.db"
+        self._local = threading.local()
+        db = self.db
+        db.execute("PRAGMA journal_mode=WAL")
+        with self.tx() as c:
+            for stmt in SCHEMA.split(";"):
+                if stmt.strip():
+                    c.execute(stmt)
+            c.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
+            c.execute("INSERT OR IGNORE INTO meta VALUES ('printer_epoch', '0')")
+
+    # -- connections and transactions ---------------------------------------------------
+    @property
+    def db(self) -> sqlite3.Connection:
+        c = getattr(self._local, "conn", None)
+        if c is None:
+            c = sqlite3.connect(self.path, timeout=30, isolation_level=None,
+                                check_same_thread=True)
+            c.row_factory = sqlite3.Row
+            c.execute("PRAGMA busy_timeout=30000")
+            c.execute("PRAGMA synchronous=FULL")
+            c.execute("PRAGMA foreign_keys=ON")
+            self._local.conn = c
+        return c
+
+    @contextmanager
+    def tx(self):
+        """One write transaction (BEGIN IMMEDIATE: the write lock is taken at once)."""
+        c = self.db
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            yield c
+        except BaseException:
+            c.execute("ROLLBACK")
+            raise
+        c.execute("COMMIT")
+
+    def close(self) -> None:
+        c = getattr(self._local, "conn", None)
+        if c is not None:
+            c.close()
+            self._local.conn = None
+
+    # -- meta ---------------------------------------------------------------------------
+    def epoch(self) -> int:
+        """The printer epoch: bumped whenever a job starts afresh on the printer; a
+        checkpoint from an older epoch is stale (something else printed since)."""
+        return int(self.db.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0])
+
+    # -- jobs -----------------------------------------------------------------------------
+    def add_job(self, *, name: str, source: str, spool_path: str, size: int, sha256: str,
+                settings: dict, preset: str | None = None, copies: int = 1, priority: int = 0,
+                hold: bool = False, key: str | None = None, client: str | None = None,
+                hot_path: str | None = None) -> tuple[dict, bool]:
+        """Queue a job; returns (job, created).  With a key already used the existing job
+        is returned (created False): a client's retry never makes a second job."""
+        with self.tx() as c:
+            if key is not None:
+                row = c.execute("SELECT * FROM jobs WHERE key=?", (key,)).fetchone()
+                if row is not None:
+                    return _job_dict(row), False
+            cur = c.execute(
+                "INSERT INTO jobs (key, name, source, client, spool_path, size, sha256, preset,"
+                " settings, copies, priority, state, hot_path, submitted)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                (key, name, source, client, spool_path, size, sha256, preset,
+                 json.dumps(settings, sort_keys=True), copies, priority,
+                 "held" if hold else "queued", hot_path, time.time()))
+            row = c.execute("SELECT * FROM jobs WHERE id=?", (cur.lastrowid,)).fetchone()
+        return _job_dict(row), True
+
+    def get(self, job_id: int) -> dict | None:
+        row = self.db.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone()
+        return _job_dict(row) if row else None
+
+    def jobs(self, states: tuple[str, ...] | None = None, limit: int | None = None,
+             after: int = 0) -> list[dict]:
+        q, args = "SELECT * FROM jobs WHERE id > ?", [after]
+        if states:
+            q += f" AND state IN ({','.join('?' * len(states))})"
+            args += list(states)
+        q += " ORDER BY id"
+        if limit:
+            q += " LIMIT ?"
+            args.append(limit)
+        return [_job_dict(r) for r in self.db.execute(q, args)]
+
+    def counts(self) -> dict:
+        out = {s: 0 for s in STATES}
+        for state, n in self.db.execute("SELECT state, COUNT(*) FROM jobs GROUP BY state"):
+            out[state] = n
+        return out
+
+    QUEUE_ORDER = "ORDER BY interrupted DESC, priority DESC, id ASC"
+
+    def next_job(self) -> dict | None:
+        """The job the worker prints next: an interrupted one first (the paper is in the
+        middle of it), then by priority, then in submission order; held jobs wait."""
+        row = self.db.execute(f"SELECT * FROM jobs WHERE state='queued' {self.QUEUE_ORDER} LIMIT 1"
+                              ).fetchone()
+        return _job_dict(row) if row else None
+
+    def queue_position(self) -> dict[int, int]:
+        rows = self.db.execute(f"SELECT id FROM jobs WHERE state='queued' {self.QUEUE_ORDER}")
+        return {r[0]: i + 1 for i, r in enumerate(rows)}
+
+    def claim(self, job_id: int) -> dict | None:
+        """queued -> printing, for the worker.  Resumes an interrupted job whose checkpoint
+        is still valid; otherwise the job starts afresh and the printer epoch moves on."""
+        now = time.time()
+        with self.tx() as c:
+            row = c.execute("SELECT * FROM jobs WHERE id=? AND state='queued'", (job_id,)).fetchone()
+            if row is None:
+                return None
+            job = _job_dict(row)
+            epoch = int(c.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0])
+            cp = job["checkpoint"]
+            if cp is not None and cp.get("epoch") != epoch:
+                cp = None                    # something else printed since: start over
+            if cp is None:
+                epoch += 1
+                c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
+                c.execute("UPDATE jobs SET checkpoint=NULL, passes_done=0, copy_started=? "
+                          "WHERE id=?", (now, job_id))
+            c.execute("UPDATE jobs SET state='printing', started=COALESCE(started, ?), "
+                      "copy_started=COALESCE(copy_started, ?), message='' WHERE id=?",
+                      (now, now, job_id))
+            row = c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone()
+        job = _job_dict(row)
+        job["epoch"] = epoch
+        return job
+
+    def save_checkpoint(self, job_id: int, checkpoint: dict, passes_total: int) -> None:
+        """After every pass: where a restarted server resumes this job."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET checkpoint=?, passes_done=?, passes_total=? WHERE id=?",
+                      (json.dumps(checkpoint, sort_keys=True), int(checkpoint.get("next_pass", 0)),
+                       passes_total, job_id))
+
+    def copy_done(self, job_id: int) -> dict:
+        """One copy printed: the next copy starts afresh."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET copies_done=copies_done+1, checkpoint=NULL, "
+                      "copy_started=NULL, interrupted=0 WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def start_copy(self, job_id: int) -> None:
+        """A later copy starts: a fresh placement on the printer (new epoch)."""
+        now = time.time()
+        with self.tx() as c:
+            epoch = int(c.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0]) + 1
+            c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
+            c.execute("UPDATE jobs SET copy_started=?, passes_done=0 WHERE id=?", (now, job_id))
+
+    def finish(self, job_id: int, state: str, message: str = "") -> dict:
+        assert state in FINAL
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, "
+                      "checkpoint=NULL, spool_path=NULL WHERE id=?",
+                      (state, message, time.time(), job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def requeue(self, job_id: int, message: str) -> None:
+        """The printer could not be reached: the job waits at the head of the queue with
+        its checkpoint (the printer keeps its state), as after a crash."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET state='queued', interrupted=1, message=? "
+                      "WHERE id=? AND state='printing'", (message, job_id))
+
+    def hold(self, job_id: int) -> dict:
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] == "held":
+                return job
+            if job["state"] != "queued":
+                raise SpoolError(f"job {job_id} is {job['state']}: only a queued job can be held")
+            c.execute("UPDATE jobs SET state='held' WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def release(self, job_id: int) -> dict:
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] == "queued":
+                return job
+            if job["state"] != "held":
+                raise SpoolError(f"job {job_id} is {job['state']}: only a held job can be released")
+            c.execute("UPDATE jobs SET state='queued' WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def set_priority(self, job_id: int, priority: int) -> dict:
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] not in ("queued", "held"):
+                raise SpoolError(f"job {job_id} is {job['state']}: its priority no longer matters")
+            c.execute("UPDATE jobs SET priority=? WHERE id=?", (priority, job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def cancel_waiting(self, job_id: int) -> dict | None:
+        """Cancel a queued or held job at once; returns None when it is printing (the
+        worker cancels it at the printer)."""
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] == "printing":
+                return None
+            if job["state"] in FINAL:
+                raise SpoolError(f"job {job_id} is already {job['state']}")
+            c.execute("UPDATE jobs SET state='cancelled', message='cancelled by the operator', "
+                      "finished=?, interrupted=0, checkpoint=NULL, spool_path=NULL WHERE id=?",
+                      (time.time(), job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    @staticmethod
+    def _get_for_change(c, job_id: int) -> dict:
+        row = c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone()
+        if row is None:
+            raise SpoolError(f"no job {job_id}", 404)
+        return _job_dict(row)
+
+    def recover(self, on_crash: str) -> list[dict]:
+        """At start-up: jobs left `printing` by a server that died.  `resume`: back to the
+        head of the queue, resumed at their first unfinished pass; `hold`: held for the
+        operator (release resumes them if nothing else printed since)."""
+        out = []
+        with self.tx() as c:
+            for row in c.execute("SELECT * FROM jobs WHERE state='printing'").fetchall():
+                job = _job_dict(row)
+                cp = job["checkpoint"] or {}
+                at = f"pass {cp['next_pass']}" if "next_pass" in cp else "the start"
+                if on_crash == "hold":
+                    msg = (f"interrupted (server stopped) before {at}; held: release to "
+                           f"resume there, or cancel")
+                    c.execute("UPDATE jobs SET state='held', interrupted=1, message=? WHERE id=?",
+                              (msg, job["id"]))
+                else:
+                    msg = f"interrupted (server stopped); resuming at {at}"
+                    c.execute("UPDATE jobs SET state='queued', interrupted=1, message=? WHERE id=?",
+                              (msg, job["id"]))
+                job["message"] = msg
+                out.append(job)
+        return out
+
+    def active_hot_paths(self) -> set[str]:
+        return {r[0] for r in self.db.execute(
+            "SELECT hot_path FROM jobs WHERE hot_path IS NOT NULL AND state IN "
+            "('queued','held','printing')")}
+
+    def spool_files_in_use(self) -> set[str]:
+        return {r[0] for r in self.db.execute(
+            "SELECT spool_path FROM jobs WHERE spool_path IS NOT NULL")}
+
+    # -- accounting -------------------------------------------------------------------------
+    def add_print(self, row: dict) -> None:
+        cols = ", ".join(row)
+        with self.tx() as c:
+            c.execute(f"INSERT INTO prints ({cols}) VALUES ({','.join('?' * len(row))})",
+                      tuple(row.values()))
+
+    def prints(self, job_id: int | None = None) -> list[dict]:
+        if job_id is None:
+            rows = self.db.execute("SELECT * FROM prints ORDER BY id")
+        else:
+            rows = self.db.execute("SELECT * FROM prints WHERE job_id=? ORDER BY id", (job_id,))
+        return [dict(r) for r in rows]
