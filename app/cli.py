@@ -298,6 +298,16 @@ def cmd_emulator(args) -> int:
     return EXIT_OK
 
 
+def cmd_gui(args) -> int:
+    from .gui import main as gui_main      # it says so if PySide6 is missing
+    argv = list(args.files)
+    if args.device:
+        argv += ["--device", args.device]
+    if args.config_dir:
+        argv += ["--config-dir", args.config_dir]
+    return gui_main(argv)
+
+
 def cmd_devices(args) -> int:
     """What printers this machine can reach: serial ports, USB printers, device nodes."""
     import glob
@@ -366,6 +376,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
+
+    p = sub.add_parser("gui", help="the operator GUI (PySide6)")
+    p.add_argument("files", nargs="*", metavar="FILE", help="files to put in the queue")
+    p.add_argument("--device", help="device spec (default: the saved setting, 'emulator')")
+    p.add_argument("--config-dir", metavar="DIR", help="settings and user profile folder")
+    p.set_defaults(func=cmd_gui)
 
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, status, report

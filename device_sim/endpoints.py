@@ -17,6 +17,8 @@ from .printer import Printer
 class InProcessSerial:
     """A pyserial-like port wired to the emulated DSP."""
 
+    synchronous = True     # the answer is there as soon as write() returns
+
     def __init__(self, printer: Printer, lock: threading.Lock):
         self.printer, self.lock = printer, lock
         self._rx = bytearray()

@@ -468,6 +468,7 @@ class Printer:
         self.log("job_begin", **self.job)
 
     def job_end(self, job: int) -> None:
+        self.before_job_end()
         if self.media:
             self.media.close()
             stats = dict(drops=[int(d) for d in self.media.drops], stray=self.media.stray,
@@ -477,8 +478,16 @@ class Printer:
         self.media = None
         self.job = None
 
+    # -- hooks for live views (app/gui/workers.LivePrinter) --------------------------------
+    def before_media_flush(self) -> None:
+        """Called before rows the paper has carried past the heads are written out."""
+
+    def before_job_end(self) -> None:
+        """Called before the job's media is closed."""
+
     def _flush_media(self) -> None:
         if self.media and self.job:
+            self.before_media_flush()
             paper_nm = (self.paper_steps - self.job["paper0"]) * self.profile.feed_um_per_step * 1000
             self.media.flush_below(int(math.floor(paper_nm / self.job["row_nm"])) - self.job["y0"])
 

@@ -44,7 +44,7 @@ class CommandLink:
         self.frames = 0
         self._lock = threading.RLock()   # one command at a time, from any thread (ESTOP)
         # an in-process device answers synchronously: no answer now means none is coming
-        self.synchronous = port.__class__.__name__.startswith("InProcess")
+        self.synchronous = bool(getattr(port, "synchronous", False))
 
     def _frame_time(self, nbytes: int) -> float:
         baud = getattr(self.port, "baudrate", P.DEFAULT_BAUD) or P.DEFAULT_BAUD

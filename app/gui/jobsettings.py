@@ -36,6 +36,14 @@ INTENT_NAMES = {
 }
 
 
+def pass_masks() -> tuple[str, ...]:
+    """The planner's pass masks, when RipSettings has a pass_mask field (else ())."""
+    if not hasattr(RipSettings(), "pass_mask"):
+        return ()
+    from ...rip.swath import PASS_MASKS
+    return tuple(PASS_MASKS)
+
+
 def placement_supported() -> bool:
     """RipSettings has a placement field (rip/place.py wired into the pipeline)."""
     return hasattr(RipSettings(), "placement")
@@ -63,6 +71,7 @@ class JobSettings:
     passes: int = 1
     bidir: bool = False
     dither: str = "fs"
+    pass_mask: str = "checker"        # which pass prints which dot (rip/swath.py PASS_MASKS)
     input_icc: str = ""
     output_icc: str = ""
     intent: str = "relative"
@@ -103,6 +112,9 @@ class JobSettings:
             self.passes = 1
         if self.dither not in METHODS:
             self.dither = "fs"
+        masks = pass_masks()
+        if masks and self.pass_mask not in masks:
+            self.pass_mask = masks[0]
         if self.intent not in INTENT_NAMES:
             self.intent = "relative"
         if self.size_mode not in SIZE_MODES:
@@ -140,6 +152,8 @@ class JobSettings:
                          dither=self.dither, ink_limit=self.ink_limit,
                          input_icc=self.input_icc or None, output_icc=self.output_icc or None,
                          intent=self.intent)
+        if pass_masks():
+            rs.pass_mask = self.pass_mask
         pl = self.placement(media_width_mm)
         if pl is not None:
             rs.placement = pl
@@ -149,7 +163,8 @@ class JobSettings:
         return self.profile or str(user_profile)
 
     def summary(self) -> str:
-        return (f"{self.dpi} dpi, {self.passes} pass{'es' if self.passes > 1 else ''} "
+        mask = f" {self.pass_mask}" if self.passes > 1 and self.pass_mask != "checker" else ""
+        return (f"{self.dpi} dpi, {self.passes} pass{'es' if self.passes > 1 else ''}{mask} "
                 f"{'bi' if self.bidir else 'uni'}, {self.dither}")
 
 

@@ -4,14 +4,14 @@ The preview is the RIP's real halftone of a downsampled image: the file is reduc
 libvips (the loader's own pipeline, so alpha, CMYK JPEG inversion and band layout are
 exactly what the RIP reads), rotated/mirrored like the placement, separated with the
 RIP's Separator (same ICC, intent, ink limit, curves) and halftoned with the RIP's
-Halftoner; render_rgb then paints the enabled separations.  When the image is no larger
-than the preview (small jobs) nothing is resampled and the preview halftone IS the
-halftone the RIP will print, dot for dot.
+Halftoner; render_rgb then paints the enabled separations.  When the placed image is no
+larger than the preview and is not resampled by the placement (1 pixel = 1 dot, or a
+physical size equal to the pixel size), nothing is resampled and the preview halftone IS
+the halftone the RIP will print, dot for dot (rotation and mirror included).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -69,33 +69,34 @@ def _vips_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray | None:
 
 
 def _band_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray:
-    """Any source (BMP has no libvips pipeline): stream bands, area-average each."""
+    """Any source (BMP has no libvips pipeline): stream bands, resize each across with
+    OpenCV, then average the rows that fall on each output row (or, when the output has
+    more rows than the source, which is then small, interpolate them)."""
     import cv2
-    fy = src.height / th
-    rows = max(1, int(math.ceil(fy)))
-    out = np.zeros((th, tw, src.channels), src.dtype)
-    y_out = 0
-    # gather exactly the source rows that map to each output row (nearest band boundaries)
-    need = [int(round((i + 1) * fy)) for i in range(th)]
-    y_src = 0
-    pending = None
-    for band in src.bands(max(rows, 64)):  # a band holds at least one output row's rows
-        pending = band if pending is None else np.concatenate([pending, band])
-        y_src += band.shape[0]
-        base = y_src - pending.shape[0]
-        while y_out < th and need[y_out] <= y_src:
-            lo = (need[y_out - 1] if y_out else 0) - base
-            hi = need[y_out] - base
-            chunk = pending[max(lo, 0):max(hi, lo + 1)]
-            row = cv2.resize(np.ascontiguousarray(chunk), (tw, 1), interpolation=cv2.INTER_AREA)
-            out[y_out] = row.reshape(tw, -1)
-            y_out += 1
-        keep = (need[y_out - 1] if y_out else 0) - base
-        pending = pending[max(keep, 0):]
-    while y_out < th:
-        out[y_out] = out[y_out - 1] if y_out else 0
-        y_out += 1
-    return out
+    C = src.channels
+    across = cv2.INTER_AREA if tw <= src.width else cv2.INTER_LINEAR
+
+    def hresize(b: np.ndarray) -> np.ndarray:
+        r = cv2.resize(np.ascontiguousarray(b), (tw, b.shape[0]), interpolation=across)
+        return r.reshape(b.shape[0], tw, C)
+
+    if th >= src.height:
+        a = np.concatenate([hresize(b) for b in src.bands(256)])
+        if th == src.height:
+            return a
+        return cv2.resize(a, (tw, th), interpolation=cv2.INTER_LINEAR).reshape(th, tw, C)
+    sums = np.zeros((th, tw, C), np.float64)
+    counts = np.zeros(th, np.int64)
+    y = 0
+    for b in src.bands(256):
+        n = b.shape[0]
+        idx = np.minimum(np.arange(y, y + n) * th // src.height, th - 1)     # sorted
+        starts = np.flatnonzero(np.diff(idx, prepend=-1))
+        sums[idx[starts]] += np.add.reduceat(hresize(b).astype(np.float64), starts, axis=0)
+        counts += np.bincount(idx, minlength=th)
+        y += n
+    out = sums / np.maximum(counts, 1)[:, None, None]
+    return np.rint(out).astype(src.dtype)
 
 
 def reduce_image(src: ImageSource, tw: int, th: int) -> np.ndarray:
@@ -163,12 +164,14 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
             desc = (f"{src.width} × {src.height} px {src.colorspace.upper() if src.colorspace != 'grey' else 'grey'} "
                     f"{src.depth}-bit {(src.format or '').upper()}").strip()
             warnings = list(getattr(sep, "warnings", []))
+            resampled = (tw, th) != (src.width, src.height)
         finally:
             src.close()
         drops = dots.reshape(-1, 4).sum(axis=0, dtype=np.int64)
         est = estimate(profile, W, H, rs.dpi, rs.passes, rs.bidir, total, js.copies,
                        preview_drops=drops, preview_dots=pw * ph)
-        exact = (pw, ph) == (W, H) and rotate == 0 and not mirror
+        # no resampling: the halftoner saw exactly the placed image the RIP will see
+        exact = (pw, ph) == (W, H) and not resampled
         return PreviewData(path=path, width_dots=W, height_rows=H, width_mm=width_mm,
                            height_mm=height_mm, dpi=rs.dpi, total_passes=total, dots=dots,
                            estimate=est, source_desc=desc, exact=exact,
