@@ -142,6 +142,7 @@ def cmd_print(args) -> int:
     from ..driver.link import LinkError
     from ..rip.load import ImageError
     from ..rip.pipeline import RipJob
+    from .server_cli import progress
 
     files = _expand(args.files)
     try:
@@ -187,10 +188,16 @@ def cmd_print(args) -> int:
                 reports.append(dict(file=f, state="failed", message=str(exc)))
                 print(f"{f}: FAILED: {exc}", file=sys.stderr)
                 continue
-            job = PrintJob(dev, rip, job_id=i + 1)
+            label = f"{i + 1}/{len(files)} {Path(f).name}"
+
+            def on_event(kind, label=label, **kw):
+                if kind == "pass":                      # a progress bar on a terminal
+                    progress(kw["index"], kw["total"], f"{label} pass {kw['index'] + 1}")
+            job = PrintJob(dev, rip, job_id=i + 1, on_event=on_event)
             current["job"] = job
             try:
                 rep = job.run().as_dict()
+                progress(1, 1, f"{label} done", final=True)
                 rep["media"] = media[i + 1]
                 if args.preview and rep["media"]:
                     from ..rip.planes import write_preview
@@ -203,12 +210,14 @@ def cmd_print(args) -> int:
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
             except JobCancelled as exc:
+                progress(0, 1, "", final=True)
                 failed += 1
                 rep = job.report.as_dict()
                 print(f"{f}: CANCELLED: {exc}", file=sys.stderr)
                 reports.append(rep)
                 break
             except (JobError, ImageError) as exc:
+                progress(0, 1, f"{label} failed", final=True)
                 failed += 1
                 rep = job.report.as_dict()
                 rep["state"], rep["message"] = "failed", str(exc)
@@ -220,6 +229,8 @@ def cmd_print(args) -> int:
         Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
     if args.json:
         print(json.dumps(reports, indent=2))
+    done = sum(1 for r in reports if r.get("state") == "done")
+    print(f"summary: {done} of {len(files)} printed, {failed} failed", file=say)
     return EXIT_JOB_FAILED if failed else EXIT_OK
 
 
@@ -428,6 +439,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    # libvips reports decoding trouble as warnings too; our ImageError says it better
+    logging.getLogger("pyvips").setLevel(logging.DEBUG if args.verbose else logging.ERROR)
     return args.func(args)
 
 
