@@ -22,11 +22,14 @@ class RingBlock:
 
 
 class Fpga:
-    def __init__(self, n_heads: int, fifo_words: int, pass_buffer_words: int, ring_blocks: int):
+    def __init__(self, n_heads: int, fifo_words: int, pass_buffer_words: int, ring_blocks: int,
+                 almost_empty_words: int = 64, block_words: int = 128):
         self.n_heads = n_heads
         self.fifo_words = fifo_words
         self.pass_buffer_words = pass_buffer_words
         self.ring_blocks = ring_blocks
+        self.almost_empty_words = almost_empty_words
+        self.block_words = block_words
         self.regs = {P.REG_DIR: 1, P.REG_DPI: P.DPI_CODE[150], P.REG_WE_EN: 0,
                      P.REG_PASS_LO: 0, P.REG_PASS_HI: 0, P.REG_FIRE_START_LO: 0,
                      P.REG_FIRE_START_HI: 0, P.REG_FIRE_COUNT_LO: 0, P.REG_FIRE_COUNT_HI: 0,
@@ -91,6 +94,8 @@ class Fpga:
         if P.REG_FIFO_LEVEL0 <= addr < P.REG_FIFO_LEVEL0 + 8:
             h = addr - P.REG_FIFO_LEVEL0
             return min(self.fifo_level_words(), 0xFFFF) if h < self.n_heads else 0
+        if P.REG_FIFO_FLAGS0 <= addr < P.REG_FIFO_FLAGS0 + 8:
+            return self.fifo_flags() if addr - P.REG_FIFO_FLAGS0 < self.n_heads else 0
         if addr == P.REG_UNDERRUN:
             return self.underrun_mask
         if addr == P.REG_CONFIG:
@@ -138,6 +143,23 @@ class Fpga:
 
     def fifo_level_words(self) -> int:
         return self.fifo_level_fires() * P.WORDS_PER_FIRE
+
+    def fifo_flags(self) -> int:
+        """EMPTY, ALMOST_EMPTY, FULL and WR_COUNT[1:0] of a head's FIFO (seed 4.2.2), and
+        the DMA request they make together: room for one more block."""
+        depth = self.fifo_words + self.pass_buffer_words
+        level = self.fifo_level_words()
+        flags = 0
+        if level == 0:
+            flags |= P.FIFO_EMPTY
+        if level <= self.almost_empty_words:
+            flags |= P.FIFO_ALMOST_EMPTY
+        if level >= depth:
+            flags |= P.FIFO_FULL
+        flags |= min(3, level * 4 // depth) << P.FIFO_WR_COUNT_SHIFT
+        if level + self.block_words <= depth:
+            flags |= P.FIFO_DREQ
+        return flags
 
     def ring_free(self) -> int:
         return max(0, self.ring_blocks - len(self.ring))

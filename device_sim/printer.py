@@ -47,7 +47,9 @@ class Printer:
         prof = self.profile
         self.n_heads = len(prof.heads)
         self.fpga = Fpga(self.n_heads, self.faults.fifo_words or prof.fifo_words,
-                         prof.pass_buffer_words, prof.ring_blocks)
+                         prof.pass_buffer_words, prof.ring_blocks,
+                         int(prof.raw["fpga"].get("almost_empty_words", 64)),
+                         prof.block_fires * P.WORDS_PER_FIRE)
         self.heads = [Head(h.index, h.name, temperature_c=float(prof.raw["head"]["nominal_temp_c"]),
                            overtemp_c=float(prof.raw["head"]["overtemp_c"])) for h in prof.heads]
         for name, nozzle in self.faults.dead_nozzle:

@@ -158,6 +158,13 @@ REG_HEAD_MASK = 0x800B
 REG_FIFO_LEVEL0 = 0x8010  # .. 0x8017, read only
 REG_UNDERRUN = 0x8018     # read: bit h = head h underran
 REG_CONFIG = 0x8019       # read: bit h = head h configured
+REG_FIFO_FLAGS0 = 0x8020  # .. 0x8027, read only: the FIFO's flags (seed 4.2.2), see below
+
+FIFO_EMPTY = 1 << 0
+FIFO_ALMOST_EMPTY = 1 << 1
+FIFO_FULL = 1 << 2
+FIFO_WR_COUNT_SHIFT = 3   # bits 3..4: WR_COUNT[1:0], the level in quarters of the depth
+FIFO_DREQ = 1 << 5        # DMA request: room for one more block
 
 DPI_CODE = {150: 0x0000, 600: 0x0001, 300: 0x0002}
 DPI_FROM_CODE = {v: k for k, v in DPI_CODE.items()}

@@ -262,3 +262,34 @@ def test_head_alignment_finds_a_misplaced_head(tmp_path, profile):
     run(RipJob(str(src), RipSettings(placement=PX), fixed), fixed, tmp_path / "m.tif", machine,
         machine=profile)
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+
+
+def test_fifo_flags_follow_the_level(profile):
+    """Seed 4.2.2's FIFO flags, readable per head, and the DMA request they make."""
+    import struct as _s
+    printer, link = connected()
+    Device(link, None, profile).load_head_config()
+    link.command(P.Op.ENABLE, b"\x01")
+    link.command(P.Op.HOME)
+    link.command(P.Op.SET_LINE, _s.pack(P.SET_LINE_FMT, 1, 0, 300, 5000, 64, 15000, 47000))
+    flags = link.read_reg(P.REG_FIFO_FLAGS0)
+    assert flags & P.FIFO_EMPTY and flags & P.FIFO_ALMOST_EMPTY and flags & P.FIFO_DREQ
+    assert not flags & P.FIFO_FULL and flags >> P.FIFO_WR_COUNT_SHIFT & 3 == 0
+    words = np.zeros((8, 16, 8), np.uint16)
+    for first in (0, 16):                      # two 128-word blocks fill a 256-word FIFO
+        printer.data_in(P.encode_block(1, first, 0xFF, words))
+        flags = link.read_reg(P.REG_FIFO_FLAGS0 + 3)
+    assert printer.fpga.fifo_level_words() == 256
+    assert flags & P.FIFO_FULL and not flags & P.FIFO_DREQ and not flags & P.FIFO_EMPTY
+    assert flags >> P.FIFO_WR_COUNT_SHIFT & 3 == 3
+    printer.data_in(P.encode_block(1, 32, 0xFF, words))   # waits in the DMA ring
+    assert printer.fpga.ring_free() == profile.ring_blocks - 1
+
+
+def test_data_stall_starves_a_fast_line_but_prints_exactly(tmp_path, profile):
+    planes = random_planes(300, 2000, seed=6)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    rep, emu = run(RipJob(str(src), RipSettings(placement=PX), profile), profile,
+                   tmp_path / "m.tif", Faults(data_stall=0.02))
+    assert sum(e["pauses"] for e in emu.events if e["event"] == "line") > 0
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
