@@ -22,6 +22,8 @@ import struct
 from typing import Any
 
 import numpy as np
+
+from .parallel import run_parallel, split
 from numba import njit
 
 __all__ = ["Separator", "INTENTS", "ink_limit_level"]
@@ -526,8 +528,12 @@ class Separator:
         out = np.empty((h * w, 4), np.uint8)
         if h * w:
             if self.mode == "lut3":
-                _sep3(band.reshape(-1, 3), self._lut, self._n_grid, self._base, self._frac, self._d1, self._d2,
-                      self._limit, self._curves, self._use_curves, out)
+                src = band.reshape(-1, 3)
+                run_parallel(
+                    (lambda a=a, b=b: _sep3(src[a:b], self._lut, self._n_grid, self._base,
+                                            self._frac, self._d1, self._d2, self._limit,
+                                            self._curves, self._use_curves, out[a:b]))
+                    for a, b in split(h * w, minimum=65536))
             elif self.mode == "direct4":
                 return self.convert_direct(band)
             elif self.mode == "passthrough":

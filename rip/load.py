@@ -803,15 +803,26 @@ class _VipsReader:
         y = 0
         while y < h:
             n = min(rows, h - y)
-            try:
-                buf = region.fetch(0, y, w, n)
-            except pv.Error as e:
-                raise ImageError(self.path, _vips_problem(self.fmt, str(e), self.path)) from None
-            arr = np.frombuffer(buf, dtype=dtype)
-            if arr.size != n * w * p.colour:
-                raise ImageError(self.path, f"cannot decode image: got {arr.size} samples for rows {y}..{y + n}")
-            yield arr.reshape(n, w, p.colour)
+            band = np.empty((n, w, p.colour), dtype)
+            # libvips is asked for a few rows at a time: its line caches grow with the
+            # largest request, so 16-row fetches keep a 40,000 px wide read to ~200 MB
+            # where 256-row fetches took twice that (measured by rip/place.py's author)
+            for yy in range(0, n, FETCH_ROWS):
+                m = min(FETCH_ROWS, n - yy)
+                try:
+                    buf = region.fetch(0, y + yy, w, m)
+                except pv.Error as e:
+                    raise ImageError(self.path, _vips_problem(self.fmt, str(e), self.path)) from None
+                arr = np.frombuffer(buf, dtype=dtype)
+                if arr.size != m * w * p.colour:
+                    raise ImageError(self.path, f"cannot decode image: got {arr.size} samples "
+                                                f"for rows {y + yy}..{y + yy + m}")
+                band[yy:yy + m] = arr.reshape(m, w, p.colour)
+            yield band
             y += n
+
+
+FETCH_ROWS = 16
 
 
 def _vips_plan(path: str, fmt: str, img, hdr: _Hdr) -> _VipsPlan:

@@ -171,8 +171,11 @@ class RipJob(PrintableJob):
                         output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
                         curves=profile_curves(self.profile))
         ht = Halftoner(s.dither, self.width, channels=4)
-        for band in self.source.bands(s.band_rows):
-            yield ht.process(sep.convert(band))
+        # two stages on two cores: loading and separating the next band overlaps the
+        # halftoning and pass packing of this one
+        separated = (sep.convert(band) for band in self.source.bands(s.band_rows))
+        for cmyk in prefetch(separated, depth=1):
+            yield ht.process(cmyk)
 
     def close(self) -> None:
         self.source.close()

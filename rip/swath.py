@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .parallel import run_parallel, split
 from .profile import COLORS, Profile, ProfileError
 
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)
@@ -70,8 +71,10 @@ class PassPlanner:
         self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
         self._head_cols = [h.x_counts // self.k for h in profile.heads]
         self._bidir_offset = profile.bidir_offset_columns.get(dpi, 0)
-        # rolling window of halftone rows: rows [self._base, self._base + len)
-        self._buf = np.zeros((0, width, 4), np.uint8)
+        # rolling window of halftone rows: rows [self._base, self._base + self._len) held in
+        # one preallocated buffer that grows only if a band is taller than any before
+        self._store = np.zeros((0, width, 4), np.uint8)
+        self._len = 0
         self._base = 0
         self._next_pass = 0
         self._printed = 0
@@ -150,9 +153,19 @@ class PassPlanner:
         """Add the next halftone rows (h, W, 4) of 0/1; returns the passes now complete."""
         if band.shape[1:] != (self.width, 4):
             raise ValueError(f"band must be (h, {self.width}, 4)")
-        self._buf = np.concatenate([self._buf, band.astype(np.uint8, copy=False)])
-        self._rows_in += band.shape[0]
+        n = band.shape[0]
+        if self._len + n > self._store.shape[0]:
+            store = np.empty((self._len + n + self.n * self.advance, self.width, 4), np.uint8)
+            store[:self._len] = self._store[:self._len]
+            self._store = store
+        self._store[self._len:self._len + n] = band
+        self._len += n
+        self._rows_in += n
         return self._emit(final=False)
+
+    @property
+    def _buf(self) -> np.ndarray:
+        return self._store[:self._len]
 
     def finish(self) -> list[PassData]:
         if self._rows_in != self.height:
@@ -173,8 +186,9 @@ class PassPlanner:
             # drop rows no later pass needs
             keep_from = max(0, (self._next_pass - self.n + 1) * self.advance)
             if keep_from > self._base:
-                drop = keep_from - self._base
-                self._buf = self._buf[drop:]
+                drop = min(keep_from - self._base, self._len)
+                self._store[:self._len - drop] = self._store[drop:self._len]   # in place
+                self._len -= drop
                 self._base = keep_from
         return out
 
@@ -189,11 +203,17 @@ class PassPlanner:
         spread_lo = -int(cols.max())                  # trigger column of image column 0, farthest head
         fires_all = self.width + int(cols.max() - cols.min())
         words = np.zeros((len(heads), fires_all, 8), np.uint16)
-        dots = np.zeros(4, np.int64)
-        _pack_pass(self._buf, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
-                   self._qmask, self._sel, self._slot_table, np.array([h.channel for h in heads]),
-                   np.array([h.y_rows for h in heads]), cols, self.profile.heads_per_color,
-                   spread_lo, words, dots)
+        channel = np.array([h.channel for h in heads])
+        y_rows = np.array([h.y_rows for h in heads])
+        parts = split(len(heads))
+        dots_parts = np.zeros((len(parts), 4), np.int64)
+        run_parallel(
+            (lambda i=i, a=a, b=b: _pack_pass(
+                self._buf, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
+                self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
+                self.profile.heads_per_color, spread_lo, a, b, words, dots_parts[i]))
+            for i, (a, b) in enumerate(parts))
+        dots = dots_parts.sum(axis=0)
         used = np.flatnonzero(words.any(axis=(0, 2)))
         if used.size == 0:
             return None
@@ -210,13 +230,13 @@ class PassPlanner:
 
 @njit(cache=True, nogil=True)
 def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table, head_channel,
-               head_y, head_col, hpc, spread_lo, words, dots):
+               head_y, head_col, hpc, spread_lo, h0, h1, words, dots):
     """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
     prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
     pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j."""
     th, tw = qmask.shape
     width = buf.shape[1]
-    for h in range(head_channel.shape[0]):
+    for h in range(h0, h1):
         ch = head_channel[h]
         for z in range(128):
             slot = head_y[h] + hpc * z
@@ -235,7 +255,13 @@ def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table
             t_off = -head_col[h] - spread_lo
             qrow = qmask[r % th]
             srow = sel[ch, rho]
-            for x in range(width):
-                if buf[row, x, ch] and srow[qrow[x % tw]] == j:
-                    words[h, x + t_off, word] |= bit
-                    dots[ch] += 1
+            pix = buf[row, :, ch]
+            out = words[h, :, word]
+            count = 0
+            for x0 in range(0, width, tw):             # whole mask tiles: no modulo per dot
+                xe = min(width, x0 + tw)
+                for x in range(x0, xe):
+                    if pix[x] and srow[qrow[x - x0]] == j:
+                        out[x + t_off] |= bit
+                        count += 1
+            dots[ch] += count
