@@ -33,7 +33,7 @@ class RipSettings:
     input_icc: str | None = None
     output_icc: str | None = None
     intent: str = "relative"
-    band_rows: int = 256
+    band_rows: int = 64          # rows per band: 64 keeps a 40,000 px wide job small
     placement: Placement = field(default_factory=Placement)   # physical size by default
 
     def check(self, profile: Profile) -> None:

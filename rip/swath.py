@@ -72,8 +72,10 @@ class PassPlanner:
         self._head_cols = [h.x_counts // self.k for h in profile.heads]
         self._bidir_offset = profile.bidir_offset_columns.get(dpi, 0)
         # rolling window of halftone rows: rows [self._base, self._base + self._len) held in
-        # one preallocated buffer that grows only if a band is taller than any before
-        self._store = np.zeros((0, width, 4), np.uint8)
+        # one preallocated buffer that grows only if a band is taller than any before, as
+        # bits (rows, colour, width / 8): a 40,000 px wide window is 8x smaller than bytes
+        self._wbytes = -(-width // 8)
+        self._store = np.zeros((0, 4, self._wbytes), np.uint8)
         self._len = 0
         self._base = 0
         self._next_pass = 0
@@ -155,16 +157,17 @@ class PassPlanner:
             raise ValueError(f"band must be (h, {self.width}, 4)")
         n = band.shape[0]
         if self._len + n > self._store.shape[0]:
-            store = np.empty((self._len + n + self.n * self.advance, self.width, 4), np.uint8)
+            store = np.empty((self._len + 2 * n, 4, self._wbytes), np.uint8)
             store[:self._len] = self._store[:self._len]
             self._store = store
-        self._store[self._len:self._len + n] = band
+        _pack_bits(np.ascontiguousarray(band), self._store[self._len:self._len + n])
         self._len += n
         self._rows_in += n
         return self._emit(final=False)
 
     @property
     def _buf(self) -> np.ndarray:
+        """The window's packed bits (rows, 4, width / 8)."""
         return self._store[:self._len]
 
     def finish(self) -> list[PassData]:
@@ -209,7 +212,7 @@ class PassPlanner:
         dots_parts = np.zeros((len(parts), 4), np.int64)
         run_parallel(
             (lambda i=i, a=a, b=b: _pack_pass(
-                self._buf, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
+                self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
                 self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
                 self.profile.heads_per_color, spread_lo, a, b, words, dots_parts[i]))
             for i, (a, b) in enumerate(parts))
@@ -229,13 +232,29 @@ class PassPlanner:
 
 
 @njit(cache=True, nogil=True)
-def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table, head_channel,
-               head_y, head_col, hpc, spread_lo, h0, h1, words, dots):
+def _pack_bits(band, out):
+    """(rows, width, 4) dots -> (rows, 4, width/8) bits, x = 0 in bit 7 of byte 0."""
+    rows, width = band.shape[0], band.shape[1]
+    for r in range(rows):
+        for c in range(4):
+            o = out[r, c]
+            for xb in range(o.shape[0]):
+                v = 0
+                x0 = xb * 8
+                for i in range(8):
+                    x = x0 + i
+                    if x < width and band[r, x, c]:
+                        v |= 128 >> i
+                o[xb] = v
+
+
+@njit(cache=True, nogil=True)
+def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table,
+               head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words, dots):
     """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
     prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
     pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j."""
     th, tw = qmask.shape
-    width = buf.shape[1]
     for h in range(h0, h1):
         ch = head_channel[h]
         for z in range(128):
@@ -255,13 +274,13 @@ def _pack_pass(buf, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table
             t_off = -head_col[h] - spread_lo
             qrow = qmask[r % th]
             srow = sel[ch, rho]
-            pix = buf[row, :, ch]
+            pix = buf[row, ch]                          # packed bits, x = 0 in bit 7
             out = words[h, :, word]
             count = 0
             for x0 in range(0, width, tw):             # whole mask tiles: no modulo per dot
                 xe = min(width, x0 + tw)
                 for x in range(x0, xe):
-                    if pix[x] and srow[qrow[x - x0]] == j:
+                    if (pix[x >> 3] >> (7 - (x & 7))) & 1 and srow[qrow[x - x0]] == j:
                         out[x + t_off] |= bit
                         count += 1
             dots[ch] += count
