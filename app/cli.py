@@ -7,6 +7,7 @@ import json
 import logging
 import signal
 import sys
+import time
 from pathlib import Path
 
 EXIT_OK, EXIT_JOB_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
@@ -164,6 +165,7 @@ def cmd_print(args) -> int:
         return EXIT_DEVICE
     reports, failed = [], 0
     say = sys.stderr if args.json else sys.stdout     # --json keeps stdout machine-readable
+    log_json = open(args.log_json, "a") if args.log_json else None
     current: dict = {}
 
     def interrupt(signum, frame):
@@ -190,9 +192,17 @@ def cmd_print(args) -> int:
                 continue
             label = f"{i + 1}/{len(files)} {Path(f).name}"
 
-            def on_event(kind, label=label, **kw):
+            def on_event(kind, label=label, job_id=i + 1, file=f, **kw):
                 if kind == "pass":                      # a progress bar on a terminal
                     progress(kw["index"], kw["total"], f"{label} pass {kw['index'] + 1}")
+                if log_json is not None:                # structured log: one JSON object a line
+                    import dataclasses
+                    data = {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v)
+                            for k, v in kw.items()}
+                    log_json.write(json.dumps({"time": round(time.time(), 3), "job": job_id,
+                                               "file": file, "event": kind, **data},
+                                              default=str) + "\n")
+                    log_json.flush()
             job = PrintJob(dev, rip, job_id=i + 1, on_event=on_event)
             current["job"] = job
             try:
@@ -225,6 +235,8 @@ def cmd_print(args) -> int:
             reports.append(rep)
     finally:
         _close_device(dev, args)
+        if log_json is not None:
+            log_json.close()
     if args.report:
         Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
     if args.json:
@@ -378,6 +390,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="JSON", help="write the job reports")
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
+    p.add_argument("--log-json", metavar="JSONL",
+                   help="structured job log: states, passes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
     _rip_options(p)
     p.set_defaults(func=cmd_print)

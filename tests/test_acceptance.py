@@ -64,8 +64,13 @@ def test_cli_print_media_equals_cli_rip_planes(tmp_path):
     exe = [sys.executable, "-m", "wideprint.app.cli"]
     media, planes, report = tmp_path / "media.tif", tmp_path / "planes.tif", tmp_path / "r.json"
     opts = ["--passes", "2", "--bidir", "--dither", "bayer"]
+    log = tmp_path / "log.jsonl"
     subprocess.run(exe + ["print", str(sample), "--device", "emulator", "--media-out", str(media),
-                          "--report", str(report)] + opts, check=True, capture_output=True)
+                          "--report", str(report), "--log-json", str(log)] + opts,
+                   check=True, capture_output=True)
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [e["state"] for e in events if e["event"] == "state"][-1] == "done"
+    assert any(e["event"] == "status" and len(e["telemetry"]["fifo_words"]) == 8 for e in events)
     subprocess.run(exe + ["rip", str(sample), "-o", str(planes)] + opts, check=True,
                    capture_output=True)
     assert np.array_equal(read_planes(media), read_planes(planes))
