@@ -42,3 +42,14 @@ def write_cmyk_tiff(path, planes01: np.ndarray) -> Path:
 def random_planes(h: int, w: int, density: float = 0.3, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return (rng.random((h, w, 4)) < density).astype(np.uint8)
+
+
+def read_bands(src, rows: int = 37) -> np.ndarray:
+    """All of an image source's bands, checking their heights, shape and dtype."""
+    parts = list(src.bands(rows))
+    for p in parts[:-1]:
+        assert p.shape[0] == rows
+    arr = np.concatenate(parts, axis=0)
+    assert arr.shape == (src.height, src.width, src.channels)
+    assert arr.dtype == (np.uint16 if src.depth == 16 else np.uint8)
+    return arr

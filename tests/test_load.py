@@ -22,19 +22,14 @@ from wideprint.rip.load import ImageError, ImageSource, open_image
 
 sys.path.insert(0, str(Path(__file__).parent))
 import corpus  # noqa: E402
+from conftest import read_bands  # noqa: E402
 from corpus import (bmp_bytes, bmp_indexed, bmp_packed, bmp_rgb24, bmp_rle, gradient_rgb,  # noqa: E402
                     strip_app14)
 
 
 def read_all(path, rows=37) -> tuple[ImageSource, np.ndarray]:
     src = open_image(path)
-    parts = list(src.bands(rows))
-    for p in parts[:-1]:
-        assert p.shape[0] == rows
-    arr = np.concatenate(parts, axis=0)
-    assert arr.shape == (src.height, src.width, src.channels)
-    assert arr.dtype == (np.uint16 if src.depth == 16 else np.uint8)
-    return src, arr
+    return src, read_bands(src, rows)
 
 
 @pytest.fixture(scope="module")

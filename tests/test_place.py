@@ -23,14 +23,7 @@ from corpus import bmp_rgb24, gradient_rgb  # noqa: E402
 ROW_UM = 68.55  # default profile: 137.1 um nozzle pitch / 2 heads per colour -> 370.53 rows/inch
 
 
-def read_all(src, rows=37) -> np.ndarray:
-    parts = list(src.bands(rows))
-    for p in parts[:-1]:
-        assert p.shape[0] == rows
-    arr = np.concatenate(parts, axis=0)
-    assert arr.shape == (src.height, src.width, src.channels)
-    assert arr.dtype == (np.uint16 if src.depth == 16 else np.uint8)
-    return arr
+from conftest import read_bands as read_all  # noqa: E402
 
 
 def vips_resize(arr: np.ndarray, w: int, h: int, kernel: str, interpretation: str | None = None) -> np.ndarray:
