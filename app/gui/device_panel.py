@@ -221,7 +221,9 @@ class DevicePanel(QWidget):
             info = d.get("info") or {}
             text = f"Connected: {d.get('spec')}"
             if info:
-                text += f" (firmware {info.get('firmware', '?')}, serial {info.get('serial', '?')})"
+                fw = info.get("firmware")
+                fw = f"{fw >> 8}.{fw & 0xFF}" if isinstance(fw, int) else "?"   # 0x0100 = 1.0
+                text += f" (firmware {fw}, serial {info.get('serial', '?')})"
             self.conn_state.setText(text)
             self.conn_state.setStyleSheet("color: #2e7d32;")
             self.connect_btn.setText("Disconnect")
