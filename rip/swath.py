@@ -277,6 +277,18 @@ def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slo
             pix = buf[row, ch]                          # packed bits, x = 0 in bit 7
             out = words[h, :, word]
             count = 0
+            if n == 1:                                  # one pass: every dot is this pass's
+                for xb in range(pix.shape[0]):
+                    v = pix[xb]
+                    if v == 0:
+                        continue
+                    xo = xb * 8 + t_off
+                    for i in range(8):
+                        if v & (128 >> i):
+                            out[xo + i] |= bit
+                            count += 1
+                dots[ch] += count
+                continue
             for x0 in range(0, width, tw):             # whole mask tiles: no modulo per dot
                 xe = min(width, x0 + tw)
                 for x in range(x0, xe):
