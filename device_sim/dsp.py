@@ -8,7 +8,6 @@ command set.  Motion itself is in printer.py / line.py; this module decodes and 
 from __future__ import annotations
 
 import struct
-import zlib
 
 from ..driver import protocol as P
 
@@ -138,9 +137,7 @@ class Dsp:
         if op == P.Op.HEAD_CONFIG_LOAD:
             count, crc = struct.unpack("<HI", payload)
             digits = self.config_digits[:count]
-            packed = bytes(digits[i] | (digits[i + 1] << 4 if i + 1 < len(digits) else 0)
-                           for i in range(0, len(digits), 2))
-            if len(digits) != count or zlib.crc32(packed) & 0xFFFFFFFF != crc:
+            if len(digits) != count or P.crc32(P.pack_digits(digits)) != crc:
                 return res(P.Result.CONFIG_CRC)
             if pr.busy():
                 return res(P.Result.BUSY)

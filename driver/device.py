@@ -15,7 +15,6 @@ and the host-side printer handle the job talks to.
 from __future__ import annotations
 
 import struct
-import zlib
 from dataclasses import dataclass
 
 from . import protocol as P
@@ -41,15 +40,12 @@ class Device:
 
     def load_head_config(self) -> None:
         digits = self.profile.head_config_digits()
-        for first in range(0, len(digits), 400):
-            chunk = digits[first:first + 400]
-            packed = bytes(chunk[i] | ((chunk[i + 1] << 4) if i + 1 < len(chunk) else 0)
-                           for i in range(0, len(chunk), 2))
-            self.link.command(P.Op.HEAD_CONFIG_DATA, struct.pack("<H", first) + packed)
-        packed_all = bytes(digits[i] | ((digits[i + 1] << 4) if i + 1 < len(digits) else 0)
-                           for i in range(0, len(digits), 2))
+        packed = P.pack_digits(digits)
+        for first in range(0, len(digits), 400):            # 400 digits = 200 bytes a frame
+            self.link.command(P.Op.HEAD_CONFIG_DATA,
+                              struct.pack("<H", first) + packed[first // 2:first // 2 + 200])
         self.link.command(P.Op.HEAD_CONFIG_LOAD,
-                          struct.pack("<HI", len(digits), zlib.crc32(packed_all) & 0xFFFFFFFF))
+                          struct.pack("<HI", len(digits), P.crc32(packed)))
 
     def close(self) -> None:
         try:

@@ -426,6 +426,13 @@ class ReportDecoder:
         return out
 
 
+# -- head configuration digits (section 2.5 HEAD_CONFIG_DATA) ----------------------------------
+def pack_digits(digits: list[int]) -> bytes:
+    """Hex digits two per byte, low nibble first (an odd last digit pads with 0)."""
+    return bytes(digits[i] | ((digits[i + 1] << 4) if i + 1 < len(digits) else 0)
+                 for i in range(0, len(digits), 2))
+
+
 # -- 128-bit nozzle words (section 4.3) ------------------------------------------------------
 def nozzles_to_words(bits: np.ndarray) -> np.ndarray:
     """bits: bool/uint8 (..., 128), index = nozzle -> uint16 (..., 8): word w bit i = nozzle 16w+i."""

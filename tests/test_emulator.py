@@ -85,7 +85,7 @@ def test_head_configuration_trace(profile):
 def test_configuration_with_a_bad_crc_is_refused(profile):
     printer, link = connected()
     digits = profile.head_config_digits()
-    packed = bytes(digits[i] | digits[i + 1] << 4 for i in range(0, 400, 2))
+    packed = P.pack_digits(digits[:400])
     link.command(P.Op.HEAD_CONFIG_DATA, struct.pack("<H", 0) + packed)
     with pytest.raises(DeviceError, match="CONFIG_CRC"):
         link.command(P.Op.HEAD_CONFIG_LOAD, struct.pack("<HI", 1020, 12345))
