@@ -93,7 +93,7 @@ class Fpga:
             return self.status_word()
         if P.REG_FIFO_LEVEL0 <= addr < P.REG_FIFO_LEVEL0 + 8:
             h = addr - P.REG_FIFO_LEVEL0
-            return min(self.fifo_level_words(), 0xFFFF) if h < self.n_heads else 0
+            return self.fifo_levels()[h]
         if P.REG_FIFO_FLAGS0 <= addr < P.REG_FIFO_FLAGS0 + 8:
             return self.fifo_flags() if addr - P.REG_FIFO_FLAGS0 < self.n_heads else 0
         if addr == P.REG_UNDERRUN:
@@ -130,7 +130,6 @@ class Fpga:
         self.loaded_fires = 0                    # fires moved into the FIFOs
         self.fired = 0                           # fires made in the current line
         self.blocks_moved = 0
-        self.min_level_fires: int | None = None
 
     def flush_unfired(self) -> None:
         """FLUSH block (docs/protocol.md 3.1): drop the DMA ring; the FIFOs keep their words
@@ -160,6 +159,12 @@ class Fpga:
         if level + self.block_words <= depth:
             flags |= P.FIFO_DREQ
         return flags
+
+    def fifo_levels(self) -> tuple[int, ...]:
+        """Words in each of the 8 head FIFOs as reported (docs/protocol.md 2.5, 3.2): the
+        heads advance together; a pass buffer beyond 16 bits reports 65535."""
+        level = min(self.fifo_level_words(), 0xFFFF)
+        return (level,) * self.n_heads + (0,) * (8 - self.n_heads)
 
     def ring_free(self) -> int:
         return max(0, self.ring_blocks - len(self.ring))

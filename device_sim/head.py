@@ -16,13 +16,10 @@ CONFIG_DSTB_HZ = 500_000
 NOZZLES = 128
 
 
-def phase_of_nozzle() -> np.ndarray:
-    """0 = A, 1 = B, 2 = C, -1 = no phase: nozzle z (0-based) with z = 3n + 1 + phase."""
-    z = np.arange(NOZZLES)
-    ph = (z - 1) % 3
-    ph[0] = -1
-    ph[NOZZLES - 1] = -1
-    return ph
+def serial_order(bits: np.ndarray) -> np.ndarray:
+    """The DI3 bit sequence of one fire: nozzle 127 first, so that after 128 DSTB edges the
+    first bit sent sits at nozzle 127 (docs/protocol.md 4.3)."""
+    return bits[::-1]
 
 
 @dataclass
@@ -56,11 +53,3 @@ class Head:
     @property
     def overtemp(self) -> bool:
         return self.temperature_c > self.overtemp_c
-
-    def shift_in_order(self, bits: np.ndarray) -> np.ndarray:
-        """The DI3 bit sequence for one fire: nozzle 127 first (docs/protocol.md 4.3)."""
-        return bits[::-1]
-
-    def latch(self, serial_bits: np.ndarray) -> np.ndarray:
-        """The shift register after 128 DSTB edges: the first bit in sits at nozzle 127."""
-        return serial_bits[::-1]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..driver import protocol as P
+from .head import serial_order
 from .motion import ServoMove, ramp_counts
 
 
@@ -237,7 +238,7 @@ class LineRun:
         part = heads.index(head)
         name = pr.profile.heads[head].name
         for i in sel:
-            bits = P.words_to_nozzles(words[part, i])
+            bits = serial_order(P.words_to_nozzles(words[part, i]))
             add_fire(pr.vcd, name, int(self.t_fire[idx[i]] * 1e9), bits, self.forward, period)
         c0, c1 = int(self.columns[idx[sel[0]]]) * self.k, int(self.columns[idx[sel[-1]]]) * self.k
         step = 1 if c1 >= c0 else -1
@@ -257,7 +258,7 @@ class LineRun:
             t = self.t_fire[fired] if fired < self.n else self.t_seg + self.move.duration
             pos = self.move.position_at(t - self.t_seg)
             column = int(self.columns[fired]) if fired < self.n else int(self.columns[-1])
-            pr.raise_fault(fault, head=head, pass_id=self.pass_id, column=column, t=t)
+            pr.raise_fault(fault, head=head, pass_id=self.pass_id, column=column)
             pr.carriage_stop(pos, t)
         pr.log("line", pass_id=self.pass_id, forward=self.forward, first_column=int(self.first),
                fires=int(self.n), fired=int(fired), fault=fault.name, pauses=self.pauses,

@@ -235,9 +235,8 @@ class Printer:
         f = self.fpga
         if f.underrun_mask:
             flags |= P.REPORT_UNDERRUN
-        levels = [min(f.fifo_level_words(), 0xFFFF)] * self.n_heads + [0] * (8 - self.n_heads)
         self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved, f.fired,
-                                   tuple(levels)).encode()
+                                   f.fifo_levels()).encode()
 
     def pump(self) -> None:
         """Let the line run as far as its data allows; move preloaded blocks into the FIFOs."""
@@ -253,8 +252,8 @@ class Printer:
             self._report(0)
 
     # -- faults -----------------------------------------------------------------------------
-    def raise_fault(self, fault: P.Fault, head: int = 0xFF, pass_id: int = 0, column: int = 0,
-                    t: float | None = None) -> None:
+    def raise_fault(self, fault: P.Fault, head: int = 0xFF, pass_id: int = 0,
+                    column: int = 0) -> None:
         if self.fault != P.Fault.NONE:
             return
         self.fault, self.fault_head, self.fault_pass, self.fault_column = fault, head, pass_id, column
@@ -292,10 +291,9 @@ class Printer:
                 flags |= bit
         motion = P.Motion.PRINTING if self.busy() else self.motion
         fires = self.fpga.fired
-        levels = [min(self.fpga.fifo_level_words(), 0xFFFF)] * self.n_heads + [0] * (8 - self.n_heads)
         return P.Status(P.Result.OK, flags, motion, self.counter(), 0, self.paper_steps,
                         self.fpga.pass_id, fires, self.fault, self.fault_head, self.fault_pass,
-                        self.fault_column, self.fpga.ring_free(), tuple(levels))
+                        self.fault_column, self.fpga.ring_free(), self.fpga.fifo_levels())
 
     def paper_present(self) -> bool:
         return self.paper_left_steps is None or self.paper_left_steps > 0

@@ -105,16 +105,17 @@ def add_config_load(vcd: Vcd, head: str, digits: list[int], dstb_rise_ns: np.nda
         vcd.set(nconfig_rise_ns, s[f"DI{bit}"], 0)
 
 
-def add_fire(vcd: Vcd, head: str, t_ns: int, bits: np.ndarray, forward: bool,
+def add_fire(vcd: Vcd, head: str, t_ns: int, serial_bits: np.ndarray, forward: bool,
              min_fire_period_ns: int) -> None:
-    """One fire: 128 DSTB clocks of DI3 (nozzle 127 first), then the three strobes."""
+    """One fire: 128 DSTB clocks of DI3 carrying `serial_bits` in the order they are sent
+    (head.serial_order), then the three strobes."""
     s = head_signals(vcd, head)
     vcd.set(t_ns, s["DIR"], 1 if forward else 0)
     vcd.set(t_ns, s["DATA_nCONFIG"], 1)
     half = 1_000_000_000 // DSTB_PRINT_HZ // 2
     t = t_ns
-    for z in range(127, -1, -1):
-        vcd.set(t, s["DI3"], int(bits[z]))
+    for bit in serial_bits:
+        vcd.set(t, s["DI3"], int(bit))
         vcd.pulse(t + half, s["DSTB"], half)
         t += 2 * half
     vcd.set(t, s["DI3"], 0)

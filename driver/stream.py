@@ -36,7 +36,6 @@ class PassStreamer:
         self.acked = 0
         self.min_fifo_words: int | None = None
         self.decoder = P.ReportDecoder()
-        self.last_report: P.Report | None = None
         self.error: BaseException | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -49,7 +48,6 @@ class PassStreamer:
         for rep in self.decoder.feed(self.data.recv(timeout)):
             if rep.pass_id != self.pass_id:
                 continue
-            self.last_report = rep
             self.acked = max(self.acked, rep.blocks)
             level = min(rep.fifo)
             self.min_fifo_words = level if self.min_fifo_words is None else min(self.min_fifo_words, level)
