@@ -376,6 +376,12 @@ class Halftoner:
                 tile[:, :, k] = np.roll(t, (-int(oy), -int(ox)), axis=(0, 1))  # tile[y, x] = t[y+oy, x+ox]
             self._thr = np.ascontiguousarray(tile.reshape(n, n * channels))
 
+    @property
+    def thresholds(self) -> np.ndarray:
+        """Ordered methods: (n, n * channels) uint8 thresholds, channel-interleaved, the
+        per-channel offsets applied; row y of the image uses row y mod n (drop = ink > T)."""
+        return self._thr
+
     def __repr__(self) -> str:
         return (f"Halftoner(method={self.method!r}, width={self.width}, channels={self.channels}, "
                 f"seed={self.seed}, row={self.row})")

@@ -14,12 +14,13 @@ from typing import Iterator
 import numpy as np
 
 from .color import Separator
-from .halftone import METHODS, Halftoner
+from .halftone import METHODS, ORDERED, Halftoner
 from .load import ImageSource, open_image
 from .place import Placement, place
 from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
-from .swath import PassData, PassPlanner
+from .screen import OrderedScreen
+from .swath import PassData, PassPlanner, pack_dots, unpack_dots
 
 
 @dataclass
@@ -94,7 +95,9 @@ def profile_curves(profile: Profile) -> np.ndarray | None:
 
 class PrintableJob:
     """What the driver prints: an image area of width x height device dots, its halftone
-    bands, and the passes planned from them.  Subclasses give `halftone_bands()`."""
+    bands, and the passes planned from them.  Subclasses give `halftone_bands()` (dots,
+    (h, W, 4) 0/1) and may give `packed_bands()` (the same as bits, (h, 4, W/8)) when they
+    can make those more cheaply; the planner works on bits."""
     path: str
     settings: RipSettings
     profile: Profile
@@ -108,6 +111,10 @@ class PrintableJob:
     def halftone_bands(self) -> Iterator[np.ndarray]:
         raise NotImplementedError
 
+    def packed_bands(self) -> Iterator[np.ndarray]:
+        for band in self.halftone_bands():
+            yield pack_dots(band)
+
     def planner(self) -> PassPlanner:
         s = self.settings
         return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
@@ -115,8 +122,8 @@ class PrintableJob:
 
     def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
         planner = planner or self.planner()
-        for band in self.halftone_bands():
-            yield from planner.feed(band)
+        for bits in self.packed_bands():
+            yield from planner.feed_packed(bits)
         yield from planner.finish()
 
     def write_planes(self, out: str | Path) -> np.ndarray:
@@ -163,19 +170,38 @@ class RipJob(PrintableJob):
             return None
         return self.profile.raw.get("color", {}).get("ink_limit_percent")
 
+    def _separator(self) -> Separator:
+        s = self.settings
+        return Separator(self.source.colorspace, self.source.depth,
+                         embedded_icc=self.source.icc, input_icc=s.input_icc,
+                         output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
+                         curves=profile_curves(self.profile))
+
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
-        s = self.settings
-        sep = Separator(self.source.colorspace, self.source.depth,
-                        embedded_icc=self.source.icc, input_icc=s.input_icc,
-                        output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
-                        curves=profile_curves(self.profile))
-        ht = Halftoner(s.dither, self.width, channels=4)
+        if self.settings.dither in ORDERED:
+            for bits in self.packed_bands():
+                yield unpack_dots(bits, self.width)
+            return
+        sep = self._separator()
+        ht = Halftoner(self.settings.dither, self.width, channels=4)
         # two stages on two cores: loading and separating the next band overlaps the
         # halftoning and pass packing of this one
-        separated = (sep.convert(band) for band in self.source.bands(s.band_rows))
+        separated = (sep.convert(band) for band in self.source.bands(self.settings.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
+
+    def packed_bands(self) -> Iterator[np.ndarray]:
+        """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
+        path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
+        next band (on both cores) overlaps the pass packing of this one."""
+        s = self.settings
+        if s.dither not in ORDERED:
+            yield from super().packed_bands()
+            return
+        screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
+        yield from prefetch((screen.process(band) for band in self.source.bands(s.band_rows)),
+                            depth=1)
 
     def close(self) -> None:
         self.source.close()

@@ -66,6 +66,9 @@ class PassPlanner:
         self._remap = self._dead_nozzle_remap()
         self.mask = mask
         self._qmask, self._sel = self._pass_mask(mask)
+        # one pass: whole 8 x 8 blocks of dots move at once (`_pack_pass1`); the general
+        # kernel gives the same words (tests/test_screen.py switches this off to compare)
+        self.block_pack = passes == 1
         hpc = profile.heads_per_color
         # per head: nozzle -> slot
         self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
@@ -155,15 +158,26 @@ class PassPlanner:
         """Add the next halftone rows (h, W, 4) of 0/1; returns the passes now complete."""
         if band.shape[1:] != (self.width, 4):
             raise ValueError(f"band must be (h, {self.width}, 4)")
-        n = band.shape[0]
+        pack_dots(band, self._window_rows(band.shape[0]))
+        return self._emit(final=False)
+
+    def feed_packed(self, bits: np.ndarray) -> list[PassData]:
+        """Add the next halftone rows as packed bits (h, 4, ceil(W / 8)) (`pack_dots`)."""
+        if bits.shape[1:] != (4, self._wbytes) or bits.dtype != np.uint8:
+            raise ValueError(f"packed band must be uint8 (h, 4, {self._wbytes})")
+        self._window_rows(bits.shape[0])[:] = bits
+        return self._emit(final=False)
+
+    def _window_rows(self, n: int) -> np.ndarray:
+        """The next n rows of the window, to be filled by the caller."""
         if self._len + n > self._store.shape[0]:
             store = np.empty((self._len + 2 * n, 4, self._wbytes), np.uint8)
             store[:self._len] = self._store[:self._len]
             self._store = store
-        _pack_bits(np.ascontiguousarray(band), self._store[self._len:self._len + n])
+        rows = self._store[self._len:self._len + n]
         self._len += n
         self._rows_in += n
-        return self._emit(final=False)
+        return rows
 
     @property
     def _buf(self) -> np.ndarray:
@@ -210,12 +224,22 @@ class PassPlanner:
         y_rows = np.array([h.y_rows for h in heads])
         parts = split(len(heads))
         dots_parts = np.zeros((len(parts), 4), np.int64)
-        run_parallel(
-            (lambda i=i, a=a, b=b: _pack_pass(
-                self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n, self.s0,
-                self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
-                self.profile.heads_per_color, spread_lo, a, b, words, dots_parts[i]))
-            for i, (a, b) in enumerate(parts))
+        hpc = self.profile.heads_per_color
+        if self.block_pack:
+            words8 = words.view(np.uint8)                   # (heads, fires, 16), little-endian
+            run_parallel(
+                (lambda i=i, a=a, b=b: _pack_pass1(
+                    self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
+                    self.s0, self._slot_table, channel, y_rows, cols, hpc, spread_lo, a, b,
+                    words8, dots_parts[i]))
+                for i, (a, b) in enumerate(parts))
+        else:
+            run_parallel(
+                (lambda i=i, a=a, b=b: _pack_pass(
+                    self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
+                    self.s0, self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
+                    hpc, spread_lo, a, b, words, dots_parts[i]))
+                for i, (a, b) in enumerate(parts))
         dots = dots_parts.sum(axis=0)
         used = np.flatnonzero(words.any(axis=(0, 2)))
         if used.size == 0:
@@ -229,6 +253,22 @@ class PassPlanner:
             words = words[:, ::-1]
             first += self._bidir_offset
         return PassData(p, direction, top, first, np.ascontiguousarray(words), dots)
+
+
+def pack_dots(band: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Halftone dots (h, W, 4) 0/1 -> packed bits (h, 4, ceil(W / 8)), x = 0 in bit 7 of
+    byte 0 (np.packbits order): the planner window's layout."""
+    band = np.ascontiguousarray(band)
+    if out is None:
+        out = np.empty((band.shape[0], 4, -(-band.shape[1] // 8)), np.uint8)
+    _pack_bits(band, out)
+    return out
+
+
+def unpack_dots(bits: np.ndarray, width: int) -> np.ndarray:
+    """Packed bits (h, 4, ceil(W / 8)) -> dots (h, W, 4) uint8 0/1."""
+    dots = np.unpackbits(bits, axis=2, count=width)          # (h, 4, W)
+    return np.ascontiguousarray(dots.transpose(0, 2, 1))
 
 
 @njit(cache=True, nogil=True)
@@ -248,6 +288,79 @@ def _pack_bits(band, out):
                 o[xb] = v
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi):
+    """The image row nozzle z of head h prints in this pass, or -1 (a nozzle outside the
+    usable run, dead-end or dead, or a row outside [lo, hi))."""
+    slot = head_y[h] + hpc * z
+    if slot < s0 or slot >= s0 + n * advance or slot >= slot_table.shape[1]:
+        return -1
+    if slot_table[ch, slot, 0] != h:
+        return -1
+    r = top + slot
+    if r < lo or r >= hi:
+        return -1
+    return r
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _transpose8(x):
+    """8x8 bit matrix in a uint64, byte k bit i -> byte i bit k (H. Warren, Hacker's
+    Delight, 2nd ed., 7-3)."""
+    t = (x ^ (x >> np.uint64(7))) & np.uint64(0x00AA00AA00AA00AA)
+    x = x ^ t ^ (t << np.uint64(7))
+    t = (x ^ (x >> np.uint64(14))) & np.uint64(0x0000CCCC0000CCCC)
+    x = x ^ t ^ (t << np.uint64(14))
+    t = (x ^ (x >> np.uint64(28))) & np.uint64(0x00000000F0F0F0F0)
+    return x ^ t ^ (t << np.uint64(28))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _popcount(x):
+    x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    x = (x + (x >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return np.int64((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
+
+
+@njit(cache=True, nogil=True)
+def _pack_pass1(buf, width, base, lo, hi, top, p, advance, n, s0, slot_table,
+                head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words8, dots):
+    """One-pass jobs: every dot under a live nozzle is this pass's, so whole 8 x 8 blocks
+    (8 nozzles x 8 columns) move at once: the 8 nozzles' bytes of packed dots, transposed,
+    are the 8 columns' bytes of nozzle bits.  words8 is the words array as bytes
+    (heads, fires, 16): byte g of a fire holds nozzles 8g .. 8g+7, bit z & 7."""
+    rows = np.empty(8, np.int64)
+    wb = buf.shape[2]
+    for h in range(h0, h1):
+        ch = head_channel[h]
+        t_off = -head_col[h] - spread_lo
+        count = 0
+        for g in range(16):
+            keep = np.uint64(0)
+            for k in range(8):
+                r = _nozzle_row(h, 8 * g + k, ch, head_y, hpc, s0, n, advance, slot_table,
+                                top, lo, hi)
+                rows[k] = r - base if r >= 0 else lo - base     # a real row, masked off
+                if r >= 0:
+                    keep |= np.uint64(0xFF) << np.uint64(8 * k)
+            if keep == 0:
+                continue
+            for xb in range(wb):
+                x = np.uint64(0)
+                for k in range(8):
+                    x |= np.uint64(buf[rows[k], ch, xb]) << np.uint64(8 * k)
+                x &= keep
+                if x == 0:
+                    continue
+                count += _popcount(x)
+                x = _transpose8(x)                 # byte c, bit k = nozzle k at column 7 - c
+                x0 = (xb << 3) + t_off
+                for i in range(min(8, width - (xb << 3))):
+                    words8[h, x0 + i, g] = np.uint8((x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF))
+        dots[ch] += count
+
+
 @njit(cache=True, nogil=True)
 def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table,
                head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words, dots):
@@ -258,13 +371,8 @@ def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slo
     for h in range(h0, h1):
         ch = head_channel[h]
         for z in range(128):
-            slot = head_y[h] + hpc * z
-            if slot < s0 or slot >= s0 + n * advance or slot >= slot_table.shape[1]:
-                continue
-            if slot_table[ch, slot, 0] != h:          # dead-end or dead nozzle
-                continue
-            r = top + slot
-            if r < lo or r >= hi:
+            r = _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi)
+            if r < 0:
                 continue
             j = p - r // advance
             rho = r % advance
@@ -277,18 +385,6 @@ def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slo
             pix = buf[row, ch]                          # packed bits, x = 0 in bit 7
             out = words[h, :, word]
             count = 0
-            if n == 1:                                  # one pass: every dot is this pass's
-                for xb in range(pix.shape[0]):
-                    v = pix[xb]
-                    if v == 0:
-                        continue
-                    xo = xb * 8 + t_off
-                    for i in range(8):
-                        if v & (128 >> i):
-                            out[xo + i] |= bit
-                            count += 1
-                dots[ch] += count
-                continue
             for x0 in range(0, width, tw):             # whole mask tiles: no modulo per dot
                 xe = min(width, x0 + tw)
                 for x in range(x0, xe):
