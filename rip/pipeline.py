@@ -194,14 +194,16 @@ class RipJob(PrintableJob):
     def packed_bands(self) -> Iterator[np.ndarray]:
         """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
         path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
-        next band (on both cores) overlaps the pass packing of this one."""
+        next bands (on both cores) overlaps the pass packing of this one."""
         s = self.settings
         if s.dither not in ORDERED:
             yield from super().packed_bands()
             return
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
-        yield from prefetch((screen.process(band) for band in self.source.bands(s.band_rows)),
-                            depth=1)
+        # three stages: libvips reads band k+2 while both cores screen band k+1 and
+        # the caller packs the passes of band k
+        loaded = prefetch(self.source.bands(s.band_rows), depth=1)
+        yield from prefetch((screen.process(band) for band in loaded), depth=1)
 
     def close(self) -> None:
         self.source.close()

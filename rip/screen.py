@@ -61,7 +61,7 @@ def _screen_cmyk(cmyk, thr, row0, out):
 
 
 @njit(cache=True, nogil=True)
-def _screen_lut3(src, lut, axes, d1, d2, s3, limit, curves, use_curves, thr, row0, out):
+def _screen_lut3(src, lut, axes, d12, s3, limit, curves, use_curves, thr, row0, out):
     """src (h, w, 3) RGB -> out (h, 4, wb) bits: separation, ink limit, curves and the
     threshold compare, a row at a time through one scratch row."""
     h, w = src.shape[0], src.shape[1]
@@ -69,7 +69,7 @@ def _screen_lut3(src, lut, axes, d1, d2, s3, limit, curves, use_curves, thr, row
     scratch = np.empty((w, 4), np.uint8)
     scratch32 = scratch.reshape(-1).view(np.uint32)
     for i in range(h):
-        if _lut3_rows(src[i], lut, axes, d1, d2, s3, limit, scratch32) or use_curves:
+        if _lut3_rows(src[i], lut, axes, d12, s3, limit, scratch32) or use_curves:
             _post_rows(scratch, limit, curves, use_curves)
         _screen_row(scratch32, thr[(row0 + i) % n], out[i])
 

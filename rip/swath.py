@@ -224,6 +224,7 @@ class PassPlanner:
         y_rows = np.array([h.y_rows for h in heads])
         parts = split(len(heads))
         dots_parts = np.zeros((len(parts), 4), np.int64)
+        spans = np.array([[fires_all, 0]] * len(parts), np.int64)   # fires with a dot: [lo, hi)
         hpc = self.profile.heads_per_color
         if self.block_pack:
             words8 = words.view(np.uint8)                   # (heads, fires, 16), little-endian
@@ -231,20 +232,19 @@ class PassPlanner:
                 (lambda i=i, a=a, b=b: _pack_pass1(
                     self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
                     self.s0, self._slot_table, channel, y_rows, cols, hpc, spread_lo, a, b,
-                    words8, dots_parts[i]))
+                    words8, dots_parts[i], spans[i]))
                 for i, (a, b) in enumerate(parts))
         else:
             run_parallel(
                 (lambda i=i, a=a, b=b: _pack_pass(
                     self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
                     self.s0, self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
-                    hpc, spread_lo, a, b, words, dots_parts[i]))
+                    hpc, spread_lo, a, b, words, dots_parts[i], spans[i]))
                 for i, (a, b) in enumerate(parts))
         dots = dots_parts.sum(axis=0)
-        used = np.flatnonzero(words.any(axis=(0, 2)))
-        if used.size == 0:
+        t0, t1 = int(spans[:, 0].min()), int(spans[:, 1].max())
+        if t1 <= t0:
             return None
-        t0, t1 = int(used[0]), int(used[-1]) + 1
         words = words[:, t0:t1]
         direction = (self._printed % 2) if self.bidir else 0
         self._printed += 1
@@ -325,13 +325,15 @@ def _popcount(x):
 
 @njit(cache=True, nogil=True)
 def _pack_pass1(buf, width, base, lo, hi, top, p, advance, n, s0, slot_table,
-                head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words8, dots):
+                head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words8, dots, span):
     """One-pass jobs: every dot under a live nozzle is this pass's, so whole 8 x 8 blocks
     (8 nozzles x 8 columns) move at once: the 8 nozzles' bytes of packed dots, transposed,
     are the 8 columns' bytes of nozzle bits.  words8 is the words array as bytes
-    (heads, fires, 16): byte g of a fire holds nozzles 8g .. 8g+7, bit z & 7."""
-    rows = np.empty(8, np.int64)
+    (heads, fires, 16): byte g of a fire holds nozzles 8g .. 8g+7, bit z & 7.  span
+    [lo, hi) widens to the fires that got a dot."""
+    flat = buf.reshape(-1)                          # the window as bytes: row, colour, byte
     wb = buf.shape[2]
+    offs = np.empty(8, np.int64)
     for h in range(h0, h1):
         ch = head_channel[h]
         t_off = -head_col[h] - spread_lo
@@ -341,32 +343,59 @@ def _pack_pass1(buf, width, base, lo, hi, top, p, advance, n, s0, slot_table,
             for k in range(8):
                 r = _nozzle_row(h, 8 * g + k, ch, head_y, hpc, s0, n, advance, slot_table,
                                 top, lo, hi)
-                rows[k] = r - base if r >= 0 else lo - base     # a real row, masked off
+                row = r - base if r >= 0 else lo - base          # a real row, masked off
+                offs[k] = (row * 4 + ch) * wb
                 if r >= 0:
                     keep |= np.uint64(0xFF) << np.uint64(8 * k)
             if keep == 0:
                 continue
+            o0, o1, o2, o3 = offs[0], offs[1], offs[2], offs[3]
+            o4, o5, o6, o7 = offs[4], offs[5], offs[6], offs[7]
+            first_xb = -1
+            last_xb = -1
+            first_x = np.uint64(0)
+            last_x = np.uint64(0)
             for xb in range(wb):
-                x = np.uint64(0)
-                for k in range(8):
-                    x |= np.uint64(buf[rows[k], ch, xb]) << np.uint64(8 * k)
+                x = (np.uint64(flat[o0 + xb]) | np.uint64(flat[o1 + xb]) << np.uint64(8)
+                     | np.uint64(flat[o2 + xb]) << np.uint64(16) | np.uint64(flat[o3 + xb]) << np.uint64(24)
+                     | np.uint64(flat[o4 + xb]) << np.uint64(32) | np.uint64(flat[o5 + xb]) << np.uint64(40)
+                     | np.uint64(flat[o6 + xb]) << np.uint64(48) | np.uint64(flat[o7 + xb]) << np.uint64(56))
                 x &= keep
                 if x == 0:
                     continue
                 count += _popcount(x)
                 x = _transpose8(x)                 # byte c, bit k = nozzle k at column 7 - c
+                if first_xb < 0:
+                    first_xb = xb
+                    first_x = x
+                last_xb = xb
+                last_x = x
                 x0 = (xb << 3) + t_off
-                for i in range(min(8, width - (xb << 3))):
-                    words8[h, x0 + i, g] = np.uint8((x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF))
+                if (xb << 3) + 8 <= width:         # no branch per column: zeros store too
+                    for i in range(8):
+                        words8[h, x0 + i, g] = np.uint8((x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF))
+                else:
+                    for i in range(width - (xb << 3)):
+                        words8[h, x0 + i, g] = np.uint8((x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF))
+            if first_xb >= 0:                      # the fires with a dot: exact columns
+                i = 0
+                while (first_x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF) == 0:
+                    i += 1
+                span[0] = min(span[0], (first_xb << 3) + i + t_off)
+                i = 7
+                while (last_x >> np.uint64(8 * (7 - i))) & np.uint64(0xFF) == 0:
+                    i -= 1
+                span[1] = max(span[1], (last_xb << 3) + i + 1 + t_off)
         dots[ch] += count
 
 
 @njit(cache=True, nogil=True)
 def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table,
-               head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words, dots):
+               head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words, dots, span):
     """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
     prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
-    pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j."""
+    pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j.
+    span [lo, hi) widens to the fires that got a dot."""
     th, tw = qmask.shape
     for h in range(h0, h1):
         ch = head_channel[h]
@@ -385,10 +414,18 @@ def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slo
             pix = buf[row, ch]                          # packed bits, x = 0 in bit 7
             out = words[h, :, word]
             count = 0
+            first = -1
+            last = -1
             for x0 in range(0, width, tw):             # whole mask tiles: no modulo per dot
                 xe = min(width, x0 + tw)
                 for x in range(x0, xe):
                     if (pix[x >> 3] >> (7 - (x & 7))) & 1 and srow[qrow[x - x0]] == j:
                         out[x + t_off] |= bit
                         count += 1
+                        last = x
+                        if first < 0:
+                            first = x
             dots[ch] += count
+            if count:
+                span[0] = min(span[0], first + t_off)
+                span[1] = max(span[1], last + 1 + t_off)
