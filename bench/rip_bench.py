@@ -596,19 +596,22 @@ def big(d: str, warm: str | None) -> None:
 
 
 def profile(method: str, w: int, h: int) -> None:
-    """Stage times of one RIP (load, separation, halftone, swath packing) measured by timing
-    each stage's calls in the pipeline loop, then cProfile's top functions."""
+    """Stage times of one RIP (load, separation, halftone, the fused ordered screen, swath
+    packing) measured by timing each stage's calls, then cProfile's top functions.  The
+    stages run in three threads at once (docs/rip.md), so their times overlap and can add up
+    to more than the total."""
     import cProfile
     import pstats
 
-    from wideprint.rip import color, halftone, swath
+    from wideprint.rip import color, halftone, screen, swath
 
     d = tempfile.mkdtemp(prefix="rip_bench_prof_", dir="/tmp")
     try:
         tif = os.path.join(d, "in.tif")
         write_tiff(tif, TestImage(w, h))
         _rip(tif, method)  # warm up (numba cache, page cache)
-        stage = {"open": 0.0, "load": 0.0, "separation": 0.0, "halftone": 0.0, "swath": 0.0}
+        stage = {"open": 0.0, "load": 0.0, "separation": 0.0, "halftone": 0.0, "screen": 0.0,
+                 "swath": 0.0}
 
         def timed(name, fn):
             def wrap(*a, **k):
@@ -638,7 +641,8 @@ def profile(method: str, w: int, h: int) -> None:
 
         patches = [(color.Separator, "convert", timed("separation", color.Separator.convert)),
                    (halftone.Halftoner, "process", timed("halftone", halftone.Halftoner.process)),
-                   (swath.PassPlanner, "feed", timed("swath", swath.PassPlanner.feed)),
+                   (screen.OrderedScreen, "process", timed("screen", screen.OrderedScreen.process)),
+                   (swath.PassPlanner, "feed_packed", timed("swath", swath.PassPlanner.feed_packed)),
                    (swath.PassPlanner, "finish", timed("swath", swath.PassPlanner.finish))]
         saved = [(cls, name, cls.__dict__[name]) for cls, name, _ in patches]
         for cls, name, fn in patches:
@@ -657,8 +661,7 @@ def profile(method: str, w: int, h: int) -> None:
         print(f"wideprint {method}, {w} x {h} RGB ({mpx:.1f} Mpx): {total:.2f} s = {mpx / total:.1f} Mpx/s")
         for k, v in stage.items():
             print(f"  {k:11s} {v:7.2f} s  {100 * v / total:5.1f} %   ({mpx / v if v else float('inf'):8.1f} Mpx/s alone)")
-        rest = total - sum(stage.values())
-        print(f"  {'other':11s} {rest:7.2f} s  {100 * rest / total:5.1f} %")
+        print("  (the stages overlap: load, screening or separation, and packing run in three threads)")
         print()
         pr = cProfile.Profile()
         pr.enable()

@@ -804,11 +804,10 @@ class _VipsReader:
         while y < h:
             n = min(rows, h - y)
             band = np.empty((n, w, p.colour), dtype)
-            # libvips is asked for a few rows at a time: its line caches grow with the
-            # largest request, so 16-row fetches keep a 40,000 px wide read to ~200 MB
-            # where 256-row fetches took twice that (measured by rip/place.py's author)
-            for yy in range(0, n, FETCH_ROWS):
-                m = min(FETCH_ROWS, n - yy)
+            # libvips is asked for a few rows at a time (fetch_rows)
+            step = fetch_rows(w * p.colour * band.itemsize)
+            for yy in range(0, n, step):
+                m = min(step, n - yy)
                 try:
                     buf = region.fetch(0, y + yy, w, m)
                 except pv.Error as e:
@@ -822,7 +821,16 @@ class _VipsReader:
             y += n
 
 
-FETCH_ROWS = 16
+FETCH_BYTES = 512 << 10    # bytes per libvips fetch, at most
+FETCH_ROWS = 16            # rows per libvips fetch, at most
+
+
+def fetch_rows(row_bytes: int) -> int:
+    """Rows to pull from libvips per fetch.  libvips' sequential caches grow with the
+    largest request: reading a 40,000 px wide RGB TIFF cost +93 MB with 4-row fetches,
+    +146 MB with 16 and +370 MB with 64 (bench/README.md), so a fetch stays under
+    FETCH_BYTES; narrower images take up to FETCH_ROWS rows, fewer calls."""
+    return max(1, min(FETCH_ROWS, FETCH_BYTES // max(1, row_bytes)))
 
 
 def _vips_plan(path: str, fmt: str, img, hdr: _Hdr) -> _VipsPlan:

@@ -37,7 +37,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from .load import ImageError, ImageSource
+from .load import ImageError, ImageSource, fetch_rows
 
 __all__ = ["Placement", "PlacedSource", "place", "FILTERS", "ROTATIONS", "MAX_SIDE", "DEFAULT_PPI"]
 
@@ -52,9 +52,6 @@ MAX_SIDE = 1_000_000
 DEFAULT_PPI = 300.0
 #: side of the square tiles of the rotation spool, pixels
 SPOOL_TILE = 128
-#: rows pulled from libvips per fetch: libvips' sequential line caches grow with the largest
-#: request, so small fetches keep memory low (the bands are re-cut to the caller's height)
-VIPS_FETCH_ROWS = 16
 #: free space left on the temporary file system after a spool is written
 DISK_RESERVE = 64 << 20
 MM_PER_INCH = 25.4
@@ -408,16 +405,12 @@ class PlacedSource:
     def _scaled(self, rows: int) -> Iterator[np.ndarray]:
         """The resampled (not rotated, not mirrored) image in bands of `rows` rows."""
         if not self.resample:
-            if rows > VIPS_FETCH_ROWS and getattr(self.source, "format", "") != "bmp":
-                # libvips-backed loaders keep line caches sized by the largest request
-                yield from _reband(self.source.bands(VIPS_FETCH_ROWS), rows)
-            else:
-                yield from self.source.bands(rows)
+            yield from self.source.bands(rows)      # the loader fetches in small pieces
         else:
             yield from _reband(self._resampled(), rows)
 
     def _resampled(self) -> Iterator[np.ndarray]:
-        """The resampled image in chunks of VIPS_FETCH_ROWS rows, pulled top to bottom."""
+        """The resampled image in chunks of `fetch_rows` rows, pulled top to bottom."""
         import pyvips
 
         src = self.source
@@ -437,7 +430,7 @@ class PlacedSource:
             raise ImageError(self.path, _vips_problem(fmt, str(e), self.path)) from None
         dtype = self.dtype
         c = self.channels
-        step = max(1, int(VIPS_FETCH_ROWS))
+        step = fetch_rows(sw * c * np.dtype(dtype).itemsize)
         y = 0
         while y < sh:
             n = min(step, sh - y)
