@@ -15,7 +15,9 @@ Back ends
   3.4 m of media is worse than refusing the file).
 * BMP (pyvips-binary has no BMP loader): our own header parser; uncompressed rows are read
   straight from the file with numpy (bottom-up or top-down), RLE4/RLE8 is decoded by a small
-  numba decoder into an index plane (one byte per pixel).
+  numba decoder into an index plane (one byte per pixel).  Not OpenCV: ``cv2.imread`` has no
+  banded read and decodes the whole image into memory, which a banner cannot afford
+  (docs/rip.md).
 
 Every problem with a file is raised as :class:`ImageError` (``str(e) == f"{path}: {problem}"``).
 """
