@@ -42,6 +42,14 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--mirror", action="store_true", help="mirror (backlit film)")
     g.add_argument("--filter", default="lanczos3", choices=("nearest", "linear", "cubic", "lanczos3"),
                    help="resampling filter")
+    g.add_argument("--align", choices=("left", "center", "right"), default="left",
+                   help="across the paper, within the side margins")
+    g.add_argument("--x-mm", type=float, default=0.0,
+                   help="then shift the image this far right (negative: left)")
+    g.add_argument("--margin-mm", type=float,
+                   help="side margins (default: the printer profile's, 5 mm)")
+    g.add_argument("--top-mm", type=float, default=0.0,
+                   help="blank paper before the image")
 
 
 def _emulator_outputs(p: argparse.ArgumentParser) -> None:
@@ -87,7 +95,8 @@ def _settings(args):
     from ..rip.place import Placement
     placement = Placement(size=args.size, width_mm=args.width_mm, height_mm=args.height_mm,
                           scale=args.scale, fit_width_mm=args.fit_width_mm, rotate=args.rotate,
-                          mirror=args.mirror, filter=args.filter)
+                          mirror=args.mirror, filter=args.filter, align=args.align,
+                          x_mm=args.x_mm, margin_mm=args.margin_mm, top_mm=args.top_mm)
     placement.check()
     return RipSettings(placement=placement, dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
                        pass_mask=args.pass_mask,

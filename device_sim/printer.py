@@ -471,8 +471,13 @@ class Printer:
         self.before_job_end()
         if self.media:
             self.media.close()
+            cpi = self.profile.counts_per_inch
             stats = dict(drops=[int(d) for d in self.media.drops], stray=self.media.stray,
-                         late=self.media.late, path=self.media.path)
+                         late=self.media.late, path=self.media.path,
+                         # where the image area sat: its left edge from the measured paper
+                         # edge, and image row 0's paper position after JOB_BEGIN
+                         left_mm=round((self.job["x0"] - self.paper_edges[0]) / cpi * 25.4, 3),
+                         lead_mm=round(self.job["y0"] * self.job["row_nm"] / 1e6, 3))
             self.jobs_done[job] = stats
             self.log("job_end", job=job, **stats)
         self.media = None

@@ -213,24 +213,51 @@ class PrintJob:
         return link.status()
 
     def place(self) -> int:
-        """x0: encoder count of image column 0, inside the measured paper; refuses a job
-        that does not fit, before anything prints."""
+        """x0: encoder count of image column 0 on the measured paper, from the placement's
+        side margins, alignment and offset (docs/placement.md, "Position on the paper");
+        refuses a job that does not fit, before anything prints."""
         present, left, right = struct.unpack(P.PAPER_FMT, self.dev.link.command(P.Op.GET_PAPER))
         if not present:
             raise JobError("no paper loaded", P.Fault.PAPER_OUT)
-        k = self.profile.k(self.rip.settings.dpi)
-        kmax = max(self.profile.k(d) for d in self.profile.dpi_modes)
-        margin = int(round(float(self.profile.raw["paper"]["margin_mm"]) / 25.4 *
-                           self.profile.counts_per_inch))
-        x0 = -(-(left + margin) // kmax) * kmax
+        prof = self.profile
+        pl = self.rip.settings.placement
+        cpi = prof.counts_per_inch
+        k = prof.k(self.rip.settings.dpi)
+        kmax = max(prof.k(d) for d in prof.dpi_modes)   # x0 on every dpi mode's column grid
+        margin_mm = float(prof.raw["paper"]["margin_mm"] if pl.margin_mm is None else pl.margin_mm)
+        margin = int(round(margin_mm / 25.4 * cpi))
+        lo, hi = left + margin, right - margin           # the printable span, counts
         width_counts = self.rip.width * k
-        if x0 + width_counts > right - margin:
-            paper_mm = (right - left) / self.profile.counts_per_inch * 25.4
-            job_mm = width_counts / self.profile.counts_per_inch * 25.4
+        paper_mm = (right - left) / cpi * 25.4
+        job_mm = width_counts / cpi * 25.4
+        if width_counts > hi - lo:
             raise JobError(f"{self.rip.path}: image is {job_mm:.0f} mm wide at "
                            f"{self.rip.settings.dpi} dpi but the paper is {paper_mm:.0f} mm "
-                           f"(with {self.profile.raw['paper']['margin_mm']} mm margins)")
+                           f"(with {margin_mm:g} mm margins)")
+        offset = float(pl.x_mm) / 25.4 * cpi
+        want = {"left": lo, "center": (lo + hi - width_counts) / 2,
+                "right": hi - width_counts}[pl.align] + offset
+        x0 = int(round(want / kmax)) * kmax
+        if x0 < lo:                                      # rounding to the grid: stay inside
+            x0 += kmax * -(-(lo - x0) // kmax)
+        if x0 + width_counts > hi:
+            x0 -= kmax * -(-(x0 + width_counts - hi) // kmax)
+        if want < lo - kmax or want + width_counts > hi + kmax:
+            where = (f"start {(lo - want) / cpi * 25.4:.1f} mm left of the left margin"
+                     if want < lo else
+                     f"end {(want + width_counts - hi) / cpi * 25.4:.1f} mm right of the right margin")
+            raise JobError(f"{self.rip.path}: the image ({job_mm:.0f} mm wide, {pl.align} "
+                           f"aligned, x offset {float(pl.x_mm):g} mm) would {where}; the paper "
+                           f"is {paper_mm:.0f} mm with {margin_mm:g} mm margins")
+        if x0 < lo:          # fits by less than one column of the coarsest grid
+            raise JobError(f"{self.rip.path}: image is {job_mm:.1f} mm wide: it does not fit "
+                           f"the {paper_mm:.0f} mm paper's printable width on the column grid "
+                           f"(with {margin_mm:g} mm margins)")
         return x0
+
+    def top_rows(self) -> int:
+        """Blank rows of paper before the image's first row (placement top_mm)."""
+        return int(round(float(self.rip.settings.placement.top_mm) * 1000 / self.profile.row_um))
 
     def feed_to(self, target_steps: int) -> None:
         link = self.dev.link
@@ -366,14 +393,15 @@ class PrintJob:
             planner = rip.planner()
             rep.passes_total = self.telemetry.passes_total = planner.total_passes
             link = self.dev.link
+            top = self.top_rows()                # the top margin: image row 0 that much later
             begin = struct.pack(P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height,
-                                rip.settings.dpi, prof.row_nm, planner.y0_rows)
+                                rip.settings.dpi, prof.row_nm, planner.y0_rows + top)
             self._recovering(lambda: link.command(P.Op.JOB_BEGIN, begin), "starting the job")
             paper0 = self.resume["paper0"] if self.resume else self._recovering(
                 lambda: link.status().paper_steps, "reading the paper position")
             next_pass = self.resume["next_pass"] if self.resume else 0
             self._checkpoint(x0=x0, paper0=paper0, next_pass=next_pass)
-            top0 = planner.top_row(0)
+            top0 = planner.top_row(0) - top
             for pd in prefetch(rip.passes(planner), depth=2):
                 if pd.index < next_pass:             # printed before the interruption
                     rep.passes_printed += 1

@@ -120,11 +120,14 @@ def validate_placement(raw) -> dict:
     for key, v in raw.items():
         if key not in fields:
             raise Invalid(f"unknown placement field {key!r} (known: {', '.join(fields)})")
-        if key in ("size", "filter") and not isinstance(v, str):
+        if key in ("size", "filter", "align") and not isinstance(v, str):
             raise Invalid(f"placement {key} must be a string")
-        if key in ("width_mm", "height_mm", "scale", "fit_width_mm") and v is not None and (
+        if key in ("width_mm", "height_mm", "scale", "fit_width_mm", "margin_mm") and v is not None and (
                 isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
             raise Invalid(f"placement {key} must be a number or null")
+        if key in ("x_mm", "top_mm") and (
+                isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+            raise Invalid(f"placement {key} must be a number")
         if key == "rotate" and not _is_int(v):
             raise Invalid("placement rotate must be an integer (0, 90, 180, 270)")
         if key == "mirror" and not isinstance(v, bool):

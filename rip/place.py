@@ -45,6 +45,7 @@ __all__ = ["Placement", "PlacedSource", "place", "FILTERS", "ROTATIONS", "MAX_SI
 FILTERS = ("nearest", "linear", "cubic", "lanczos3")
 #: clockwise rotations in degrees
 ROTATIONS = (0, 90, 180, 270)
+ALIGNS = ("left", "center", "right")
 #: largest placed image side, in device columns or rows (3.4 m at 600 dpi is 80,315 columns;
 #: 1,000,000 rows is 68.55 m of media)
 MAX_SIDE = 1_000_000
@@ -70,6 +71,16 @@ def _ppi(v: Any) -> float | None:
     return v if math.isfinite(v) and v > 0 else None
 
 
+def _finite(name: str, v: Any) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"placement: {name} must be a number, not {v!r}") from None
+    if not math.isfinite(f):
+        raise ValueError(f"placement: {name} must be a finite number, not {v!r}")
+    return f
+
+
 def _positive(name: str, v: Any) -> float:
     try:
         f = float(v)
@@ -93,6 +104,11 @@ class Placement:
     rotate: int = 0  # 0, 90, 180, 270 degrees clockwise
     mirror: bool = False  # horizontal mirror on the device (applied after rotation)
     filter: str = "lanczos3"  # nearest | linear | cubic | lanczos3
+    # where the image goes on the measured paper (applied by the driver, driver/job.py):
+    align: str = "left"  # left | center | right, within the paper minus the side margins
+    x_mm: float = 0.0  # then shifted this far to the right (negative: to the left)
+    margin_mm: float | None = None  # side margins; None: the printer profile's [paper] margin_mm
+    top_mm: float = 0.0  # blank paper fed before the image's first row
 
     def check(self) -> None:
         """Raise ValueError naming the problem if the options are inconsistent."""
@@ -102,6 +118,13 @@ class Placement:
             raise ValueError(f"placement: filter must be one of {', '.join(FILTERS)}, not {self.filter!r}")
         if isinstance(self.rotate, bool) or self.rotate not in ROTATIONS:
             raise ValueError(f"placement: rotate must be 0, 90, 180 or 270 (degrees clockwise), not {self.rotate!r}")
+        if self.align not in ALIGNS:
+            raise ValueError(f"placement: align must be one of {', '.join(ALIGNS)}, not {self.align!r}")
+        _finite("x_mm", self.x_mm)
+        for name in ("top_mm", "margin_mm"):
+            v = getattr(self, name)
+            if v is not None and _finite(name, v) < 0:
+                raise ValueError(f"placement: {name} must not be negative, not {v!r}")
         given = {n: getattr(self, n) for n in ("width_mm", "height_mm", "scale", "fit_width_mm")
                  if getattr(self, n) is not None}
         for name, v in given.items():

@@ -64,9 +64,10 @@ def test_cli_print_media_equals_cli_rip_planes(tmp_path):
     exe = [sys.executable, "-m", "wideprint.app.cli"]
     media, planes, report = tmp_path / "media.tif", tmp_path / "planes.tif", tmp_path / "r.json"
     opts = ["--passes", "2", "--bidir", "--dither", "bayer"]
-    log = tmp_path / "log.jsonl"
+    log, emu_log = tmp_path / "log.jsonl", tmp_path / "emu.jsonl"
     subprocess.run(exe + ["print", str(sample), "--device", "emulator", "--media-out", str(media),
-                          "--report", str(report), "--log-json", str(log)] + opts,
+                          "--report", str(report), "--log-json", str(log), "--event-log", str(emu_log),
+                          "--align", "center", "--x-mm", "-20", "--top-mm", "15"] + opts,
                    check=True, capture_output=True)
     events = [json.loads(line) for line in log.read_text().splitlines()]
     assert [e["state"] for e in events if e["event"] == "state"][-1] == "done"
@@ -77,6 +78,13 @@ def test_cli_print_media_equals_cli_rip_planes(tmp_path):
     rep = json.loads(report.read_text())[0]
     assert rep["state"] == "done" and rep["stray_drops"] == 0
     assert rep["passes_printed"] > 0
+    # placed as asked: centred on the emulator's 3200 mm sheet, 20 mm to the left
+    from wideprint.rip.profile import load_profile
+    prof = load_profile()
+    end = [json.loads(line) for line in emu_log.read_text().splitlines()
+           if json.loads(line)["event"] == "job_end"][-1]
+    width_mm = rep["width_dots"] * prof.k(300) / prof.counts_per_inch * 25.4
+    assert abs(end["left_mm"] - ((3200 - width_mm) / 2 - 20)) < 0.2
 
 
 def test_cli_bad_file_fails_its_job_and_the_next_prints(tmp_path):
@@ -120,3 +128,59 @@ def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
     PrintJob(dev, RipJob(str(good), RipSettings(placement=PX), profile), job_id=2).run()
     dev.emulator.close()
     assert np.array_equal(read_planes(tmp_path / "m2.tif"), random_planes(100, 80, seed=18))
+
+
+@pytest.mark.parametrize("align,x_mm,margin_mm,top_mm", [
+    ("left", 0.0, None, 0.0), ("left", 12.5, 0.0, 20.0), ("center", -30.0, 10.0, 0.0),
+    ("right", 0.0, 7.0, 5.0), ("right", -100.0, None, 0.0),
+])
+def test_position_and_margins_on_the_measured_paper(tmp_path, profile, align, x_mm, margin_mm,
+                                                     top_mm):
+    """The image lands where the placement says, measured by the emulator from the paper's
+    edge and feed, and the media still equals the planes."""
+    from dataclasses import replace
+    from wideprint.device_sim.faults import Faults
+    planes = random_planes(300, 333, density=0.3, seed=5)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    paper = 300.0
+    runs = {}
+    for top in (0.0, top_mm):
+        pl = replace(PX, align=align, x_mm=x_mm, margin_mm=margin_mm, top_mm=top)
+        media = tmp_path / f"m{top}.tif"
+        rep, emu = print_on_emulator(src, RipSettings(placement=pl, passes=2), profile, media,
+                                     Faults(paper_width_mm=paper))
+        assert np.array_equal(read_planes(media), planes)
+        runs[top] = (emu.jobs_done[1], emu.paper_steps)
+    done, steps = runs[top_mm]
+    cpi = profile.counts_per_inch
+    width_mm = 333 * profile.k(300) / cpi * 25.4
+    margin = profile.raw["paper"]["margin_mm"] if margin_mm is None else margin_mm
+    want = {"left": margin, "center": (paper - width_mm) / 2,
+            "right": paper - margin - width_mm}[align] + x_mm
+    # x0 sits on the coarsest dpi mode's column grid, inside the margins
+    grid_mm = max(profile.k(d) for d in profile.dpi_modes) / cpi * 25.4
+    assert abs(done["left_mm"] - want) <= grid_mm + 25.4 / cpi
+    # the top margin: image row 0 later by top_mm, and that much more paper used
+    row_mm = profile.row_um / 1000
+    assert abs(done["lead_mm"] - runs[0.0][0]["lead_mm"] - top_mm) <= row_mm / 2 + 1e-6
+    fed_mm = (steps - runs[0.0][1]) * profile.feed_um_per_step / 1000
+    assert abs(fed_mm - top_mm) <= row_mm / 2 + profile.feed_um_per_step / 1000
+
+
+@pytest.mark.parametrize("align,x_mm,msg", [
+    ("right", 5.0, r"in.tif: the image \(20 mm wide, right aligned, x offset 5 mm\) would end "
+                   r"5.0 mm right of the right margin; the paper is 300 mm with 5 mm margins"),
+    ("left", -5.0, "would start 5.0 mm left of the left margin"),
+])
+def test_position_off_the_paper_is_refused_before_printing(tmp_path, profile, align, x_mm, msg):
+    from dataclasses import replace
+    from wideprint.device_sim.faults import Faults
+    src = write_cmyk_tiff(tmp_path / "in.tif", random_planes(40, 236, seed=2))   # 19.98 mm
+    pl = replace(PX, align=align, x_mm=x_mm)
+    dev = open_device("emulator", profile, Faults(paper_width_mm=300), media_path=str(tmp_path / "m.tif"))
+    try:
+        with pytest.raises(JobError, match=msg):
+            PrintJob(dev, RipJob(str(src), RipSettings(placement=pl), profile)).run()
+        assert dev.emulator.jobs_done == {} and dev.emulator.blocks_total == 0
+    finally:
+        dev.emulator.close()

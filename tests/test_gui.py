@@ -75,10 +75,8 @@ def drop_files(win, paths) -> None:
 
 
 def one_pixel_one_dot(win) -> None:
-    """Once the RIP places images (rip/place.py), keep these pixel-exact test images 1:1."""
-    sp = win.settings_panel
-    if sp.placement_enabled:
-        choose(sp.size_mode, "pixels")
+    """Keep these pixel-exact test images 1:1 (no resampling by rip/place.py)."""
+    choose(win.settings_panel.size_mode, "pixels")
 
 
 def rip_planes(tmp_path, item, win) -> np.ndarray:
@@ -166,8 +164,6 @@ def test_settings_widgets_print_on_the_emulator_equal_to_the_rip_planes(qtbot, w
 
 def test_placement_controls_scale_rotate_mirror_reach_the_rip(qtbot, win, tmp_path):
     sp = win.settings_panel
-    if not sp.placement_enabled:
-        pytest.skip("RipSettings has no placement yet")
     src = write_cmyk_tiff(tmp_path / "p.tif", random_planes(90, 160, density=0.4, seed=10))
     choose(sp.size_mode, "scale")
     sp.scale.setValue(150)
@@ -177,6 +173,7 @@ def test_placement_controls_scale_rotate_mirror_reach_the_rip(qtbot, win, tmp_pa
     wait_ready(qtbot, [item])
     pl = item.settings.placement()
     assert (pl.scale, pl.rotate, pl.mirror) == (1.5, 90, True)
+    assert (pl.align, pl.x_mm, pl.margin_mm, pl.top_mm) == ("left", 0.0, None, 0.0)
     e = item.estimate
     from wideprint.rip.load import open_image
     with open_image(str(src)) as f:
@@ -192,6 +189,19 @@ def test_placement_controls_scale_rotate_mirror_reach_the_rip(qtbot, win, tmp_pa
     media = read_planes(item.media[0])
     assert media.shape[:2] == (e.height_rows, e.width_dots)
     assert np.array_equal(media, rip_planes(tmp_path, item, win))
+    # position and margins reach the placement too (the driver applies them)
+    choose(sp.align, "center")
+    sp.x_mm.setValue(-12.5)
+    sp.margin_mm.setValue(8)
+    sp.top_mm.setValue(30)
+    js = sp.settings()
+    assert (js.align, js.x_mm, js.margin_mm, js.top_mm) == ("center", -12.5, 8.0, 30.0)
+    pl2 = js.placement()
+    assert (pl2.align, pl2.x_mm, pl2.margin_mm, pl2.top_mm) == ("center", -12.5, 8.0, 30.0)
+    sp.margin_mm.setValue(-0.1)                    # "profile"
+    assert sp.settings().margin_mm is None
+    sp.set_settings(js)
+    assert sp.settings() == js
 
 
 def test_corrupt_file_fails_its_row_and_the_queue_goes_on(qtbot, win, tmp_path):

@@ -129,6 +129,11 @@ def test_target_size_from_files(tmp_path):
     (dict(rotate=45), "rotate"),
     (dict(filter="bicubic"), "filter"),
     (dict(size="inches"), "size"),
+    (dict(align="middle"), "align must be one of left, center, right"),
+    (dict(x_mm=float("inf")), "x_mm must be a finite number"),
+    (dict(top_mm=-1), "top_mm must not be negative"),
+    (dict(margin_mm=-0.5), "margin_mm must not be negative"),
+    (dict(margin_mm="wide"), "margin_mm must be a number"),
 ])
 def test_bad_options_refused(kw, phrase):
     with pytest.raises(ValueError, match=phrase):

@@ -1,9 +1,10 @@
 """The settings of one queued job, as the GUI edits them, and their translation into the
-RIP's RipSettings (+ Placement once RipSettings has a ``placement`` field)."""
+RIP's RipSettings and Placement."""
 
 from __future__ import annotations
 
 import functools
+import math
 import os
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -20,6 +21,7 @@ SIZE_MODES = {
     "pixels": "1 image pixel = 1 dot",
 }
 ROTATIONS = (0, 90, 180, 270)
+ALIGN_NAMES = {"left": "Left", "center": "Centre", "right": "Right"}
 FILTERS = ("lanczos3", "cubic", "linear", "nearest")
 DITHER_NAMES = {
     "fs": "Floyd–Steinberg",
@@ -37,16 +39,9 @@ INTENT_NAMES = {
 
 
 def pass_masks() -> tuple[str, ...]:
-    """The planner's pass masks, when RipSettings has a pass_mask field (else ())."""
-    if not hasattr(RipSettings(), "pass_mask"):
-        return ()
+    """The planner's pass masks (rip/swath.py)."""
     from ...rip.swath import PASS_MASKS
     return tuple(PASS_MASKS)
-
-
-def placement_supported() -> bool:
-    """RipSettings has a placement field (rip/place.py wired into the pipeline)."""
-    return hasattr(RipSettings(), "placement")
 
 
 @functools.lru_cache(maxsize=16)
@@ -77,7 +72,7 @@ class JobSettings:
     intent: str = "relative"
     ink_limit: float | None = None    # percent; None = the profile's default (RGB/grey only)
     copies: int = 1
-    # placement (rip/place.py); used when RipSettings supports it
+    # placement (rip/place.py)
     size_mode: str = "original"
     width_mm: float | None = None
     height_mm: float | None = None
@@ -86,6 +81,10 @@ class JobSettings:
     rotate: int = 0
     mirror: bool = False
     filter: str = "lanczos3"
+    align: str = "left"                # across the paper, within the side margins
+    x_mm: float = 0.0                  # then shifted right (negative: left)
+    margin_mm: float | None = None     # side margins; None = the printer profile's
+    top_mm: float = 0.0                # blank paper before the image
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "JobSettings":
@@ -123,17 +122,30 @@ class JobSettings:
             self.rotate = 0
         if self.filter not in FILTERS:
             self.filter = "lanczos3"
+        if self.align not in ALIGN_NAMES:
+            self.align = "left"
+        for name in ("x_mm", "top_mm", "margin_mm"):
+            v = getattr(self, name)
+            if v is None and name == "margin_mm":
+                continue
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                v = math.nan
+            if not math.isfinite(v) or (name != "x_mm" and v < 0):
+                v = None if name == "margin_mm" else 0.0
+            setattr(self, name, v)
         try:
             self.copies = max(1, min(999, int(self.copies)))
         except (TypeError, ValueError):
             self.copies = 1
 
     def placement(self, media_width_mm: float | None = None):
-        """A rip.place.Placement for these settings (None when the RIP has no placement)."""
-        if not placement_supported():
-            return None
+        """A rip.place.Placement for these settings."""
         from ...rip.place import Placement
-        kw = dict(rotate=int(self.rotate), mirror=bool(self.mirror), filter=self.filter)
+        kw = dict(rotate=int(self.rotate), mirror=bool(self.mirror), filter=self.filter,
+                  align=self.align, x_mm=float(self.x_mm), margin_mm=self.margin_mm,
+                  top_mm=float(self.top_mm))
         m = self.size_mode
         if m == "pixels":
             return Placement(size="pixels", **kw)
@@ -148,16 +160,11 @@ class JobSettings:
         return Placement(**kw)
 
     def rip_settings(self, media_width_mm: float | None = None) -> RipSettings:
-        rs = RipSettings(dpi=int(self.dpi), passes=int(self.passes), bidir=bool(self.bidir),
-                         dither=self.dither, ink_limit=self.ink_limit,
-                         input_icc=self.input_icc or None, output_icc=self.output_icc or None,
-                         intent=self.intent)
-        if pass_masks():
-            rs.pass_mask = self.pass_mask
-        pl = self.placement(media_width_mm)
-        if pl is not None:
-            rs.placement = pl
-        return rs
+        return RipSettings(dpi=int(self.dpi), passes=int(self.passes), bidir=bool(self.bidir),
+                           dither=self.dither, ink_limit=self.ink_limit,
+                           input_icc=self.input_icc or None, output_icc=self.output_icc or None,
+                           intent=self.intent, pass_mask=self.pass_mask,
+                           placement=self.placement(media_width_mm))
 
     def profile_path(self, user_profile: Path) -> str:
         return self.profile or str(user_profile)
@@ -168,10 +175,13 @@ class JobSettings:
                 f"{'bi' if self.bidir else 'uni'}, {self.dither}")
 
 
-def printable_width_mm(profile: Profile, paper_mm: float | None = None) -> float:
-    """Paper width less both margins (the emulator's sheet when no paper was measured)."""
+def printable_width_mm(profile: Profile, paper_mm: float | None = None,
+                       margin_mm: float | None = None) -> float:
+    """Paper width less both side margins (the job's, else the profile's; the emulator's
+    sheet when no paper was measured)."""
     paper = paper_mm or float(profile.raw["paper"]["default_width_mm"])
-    return max(0.0, paper - 2 * float(profile.raw["paper"]["margin_mm"]))
+    margin = float(profile.raw["paper"]["margin_mm"] if margin_mm is None else margin_mm)
+    return max(0.0, paper - 2 * margin)
 
 
 def profile_label(path: str | Path, user_profile: Path) -> str:

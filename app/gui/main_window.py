@@ -480,7 +480,7 @@ class MainWindow(QMainWindow):
             prof = cached_profile(self.profile_path(js))
         except Exception:  # noqa: BLE001
             return 3190.0
-        return printable_width_mm(prof, self.paper_mm)
+        return printable_width_mm(prof, self.paper_mm, js.margin_mm)
 
     def _preview_key(self, it: Q.QueueItem) -> tuple:
         path = self.profile_path(it.settings)

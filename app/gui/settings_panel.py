@@ -11,14 +11,13 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog
 
 from ...rip.halftone import METHODS
 from .estimate import Estimate, fmt_duration, fmt_ml
-from .jobsettings import (DITHER_NAMES, FILTERS, INTENT_NAMES, ROTATIONS, SIZE_MODES, JobSettings,
-                          pass_masks, placement_supported)
+from .jobsettings import (ALIGN_NAMES, DITHER_NAMES, FILTERS, INTENT_NAMES, ROTATIONS, SIZE_MODES,
+                          JobSettings, pass_masks)
 
 MASK_NAMES = {"checker": "Checkerboard", "random": "Random (blue noise)", "feather": "Feathered edges"}
 
 PASSES = (1, 2, 3, 4, 6, 8)
 DPIS = (150, 300, 600)
-COMING = "coming: placement (rip/place.py) is not wired into the RIP yet"
 
 
 class _FileField(QWidget):
@@ -180,21 +179,41 @@ class SettingsPanel(QWidget):
         for x in FILTERS:
             self.filter.addItem(x, x)
         pf.addRow("Resampling", self.filter)
+        # position on the measured paper (applied when the job starts: docs/placement.md)
+        pos = QHBoxLayout()
+        self.align = QComboBox()
+        self.align.setObjectName("align")
+        for k, v in ALIGN_NAMES.items():
+            self.align.addItem(v, k)
+        self.x_mm = self._mm_spin("x_mm", lo=-10_000)
+        self.x_mm.setSpecialValueText("")
+        self.x_mm.setPrefix("+ ")
+        self.x_mm.setToolTip("Shift right from the aligned position (negative: left)")
+        pos.addWidget(self.align)
+        pos.addWidget(self.x_mm, 1)
+        pf.addRow("Position", pos)
+        mar = QHBoxLayout()
+        self.margin_mm = self._mm_spin("margin_mm")
+        self.margin_mm.setMinimum(-0.1)
+        self.margin_mm.setSpecialValueText("profile")
+        self.margin_mm.setToolTip("Side margins inside the measured paper edges")
+        self.top_mm = self._mm_spin("top_mm")
+        self.top_mm.setSpecialValueText("none")
+        self.top_mm.setToolTip("Blank paper fed before the image")
+        mar.addWidget(QLabel("sides"))
+        mar.addWidget(self.margin_mm, 1)
+        mar.addWidget(QLabel("top"))
+        mar.addWidget(self.top_mm, 1)
+        pf.addRow("Margins", mar)
         outer.addWidget(self.place_box)
-        self.placement_enabled = placement_supported()
-        if not self.placement_enabled:
-            for w in self.place_box.findChildren(QWidget):
-                w.setEnabled(False)
-                w.setToolTip(COMING)
-            self.place_box.setToolTip(COMING)
-            self.place_box.setTitle("Size and position (coming)")
 
         outer.addStretch(1)
 
         for w in (self.profile, self.dpi, self.passes, self.pass_mask, self.direction, self.dither, self.intent,
-                  self.size_mode, self.rotate, self.filter):
+                  self.size_mode, self.rotate, self.filter, self.align):
             w.currentIndexChanged.connect(self._edited)
-        for w in (self.ink_limit, self.width_mm, self.height_mm, self.scale, self.fit_width):
+        for w in (self.ink_limit, self.width_mm, self.height_mm, self.scale, self.fit_width,
+                  self.x_mm, self.margin_mm, self.top_mm):
             w.valueChanged.connect(self._edited)
         self.copies.valueChanged.connect(self._edited)
         for w in (self.ink_on, self.mirror):
@@ -203,10 +222,10 @@ class SettingsPanel(QWidget):
         self.output_icc.changed.connect(self._edited)
         self._update_enabled()
 
-    def _mm_spin(self, name: str) -> QDoubleSpinBox:
+    def _mm_spin(self, name: str, lo: float = 0) -> QDoubleSpinBox:
         s = QDoubleSpinBox()
         s.setObjectName(name)
-        s.setRange(0, 1_000_000)
+        s.setRange(lo, 1_000_000)
         s.setDecimals(1)
         s.setSuffix(" mm")
         s.setSpecialValueText("auto")
@@ -248,7 +267,10 @@ class SettingsPanel(QWidget):
             width_mm=self.width_mm.value() or None, height_mm=self.height_mm.value() or None,
             scale_pct=self.scale.value(), fit_width_mm=self.fit_width.value() or None,
             rotate=self.rotate.currentData(), mirror=self.mirror.isChecked(),
-            filter=self.filter.currentData())
+            filter=self.filter.currentData(), align=self.align.currentData(),
+            x_mm=self.x_mm.value(),
+            margin_mm=None if self.margin_mm.value() < 0 else self.margin_mm.value(),
+            top_mm=self.top_mm.value())
 
     def set_settings(self, js: JobSettings, title: str | None = None) -> None:
         self._loading = True
@@ -264,7 +286,8 @@ class SettingsPanel(QWidget):
                                  (self.direction, bool(js.bidir)), (self.dither, js.dither),
                                  (self.pass_mask, js.pass_mask),
                                  (self.intent, js.intent), (self.size_mode, js.size_mode),
-                                 (self.rotate, js.rotate), (self.filter, js.filter)):
+                                 (self.rotate, js.rotate), (self.filter, js.filter),
+                                 (self.align, js.align)):
                 combo.setCurrentIndex(max(0, combo.findData(value)))
             self.input_icc.setText(js.input_icc)
             self.output_icc.setText(js.output_icc)
@@ -277,14 +300,15 @@ class SettingsPanel(QWidget):
             self.scale.setValue(js.scale_pct)
             self.fit_width.setValue(js.fit_width_mm or 0)
             self.mirror.setChecked(bool(js.mirror))
+            self.x_mm.setValue(js.x_mm)
+            self.margin_mm.setValue(-0.1 if js.margin_mm is None else js.margin_mm)
+            self.top_mm.setValue(js.top_mm)
         finally:
             self._loading = False
         self._update_enabled()
 
     def _update_enabled(self) -> None:
         self.ink_limit.setEnabled(self.ink_on.isChecked())
-        if not self.placement_enabled:
-            return
         m = self.size_mode.currentData()
         self.width_mm.setEnabled(m == "size")
         self.height_mm.setEnabled(m == "size")

@@ -438,11 +438,12 @@ class PrinterWorker(QObject):
             return PatternJob.for_pattern(p["kind"], profile, width, int(p.get("dpi", 150)),
                                           **{x: p[x] for x in ("head", "nozzle") if x in p})
         from ...rip.pipeline import RipJob
-        return RipJob(t.path, t.settings.rip_settings(t.media_width_mm or self._printable_mm(profile)), profile)
+        return RipJob(t.path, t.settings.rip_settings(
+            t.media_width_mm or self._printable_mm(profile, t.settings.margin_mm)), profile)
 
-    def _printable_mm(self, profile) -> float:
+    def _printable_mm(self, profile, margin_mm: float | None = None) -> float:
         from .jobsettings import printable_width_mm
-        return printable_width_mm(profile, self.paper_mm)
+        return printable_width_mm(profile, self.paper_mm, margin_mm)
 
     def _run_ticket(self, t: Ticket) -> dict:
         from ...rip.load import ImageError
