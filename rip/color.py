@@ -559,7 +559,9 @@ class Separator:
         self._table = table
 
     # ------------------------------------------------------------------------------------
-    def _check_band(self, band: np.ndarray) -> np.ndarray:
+    def check_band(self, band: np.ndarray) -> np.ndarray:
+        """The band as a C-contiguous (h, w, channels) array of this separator's depth, or
+        ValueError naming what does not match."""
         band = np.asarray(band)
         want = np.uint16 if self.depth == 16 else np.uint8
         if band.dtype != want:
@@ -573,7 +575,7 @@ class Separator:
 
     def convert(self, band: np.ndarray) -> np.ndarray:
         """band (h, w, channels) from ImageSource.bands() -> uint8 (h, w, 4) C, M, Y, K, C-contiguous."""
-        band = self._check_band(band)
+        band = self.check_band(band)
         h, w, ch = band.shape
         if self.mode == "passthrough" and self.depth == 8 and self._limit < 0 and not self._use_curves:
             return band  # bit-exact, no copy
@@ -607,7 +609,7 @@ class Separator:
     def convert_direct(self, band: np.ndarray) -> np.ndarray:
         """Reference path: the same conversion with lcms applied to every pixel (pyvips icc_transform), no
         LUT.  Slow; used to check the LUT and as a fallback."""
-        band = self._check_band(band)
+        band = self.check_band(band)
         h, w, ch = band.shape
         if self.mode in ("lut3", "direct4"):
             res = _icc_transform(band, ch, self.input_profile, self.output_profile, self.intent, self.bpc,

@@ -17,7 +17,7 @@ from numba import njit
 
 from .color import Separator, _lut3_rows, _post_rows
 from .halftone import ORDERED, Halftoner
-from .parallel import WORKERS, run_parallel
+from .parallel import run_parallel, split
 
 __all__ = ["OrderedScreen"]
 
@@ -104,17 +104,16 @@ class OrderedScreen:
         out = np.empty((h, 4, self.wbytes), np.uint8)
         row0 = self.row
         if sep.mode == "lut3":
-            src = sep._check_band(band)
+            src = sep.check_band(band)
             lut, post = sep.lut3_tables(), sep.post_tables()
             kernel, args = _screen_lut3, lut + post
         else:
             # other colour modes: CMYK first, then screen
             src = sep.convert(band).reshape(h, -1).view(np.uint32)
             kernel, args = _screen_cmyk, ()
-        parts = max(1, min(WORKERS, h, h * self.width // 65536))
-        edges = [h * i // parts for i in range(parts + 1)]
+        # rows split over the workers, at least 64 K pixels each
         run_parallel(
             (lambda a=a, b=b: kernel(src[a:b], *args, self.thr, row0 + a, out[a:b]))
-            for a, b in zip(edges, edges[1:]) if b > a)
+            for a, b in split(h, minimum=-(-65536 // self.width)))
         self.row = row0 + h
         return out
