@@ -418,7 +418,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_gui)
 
     from .server_cli import add_parser as add_server_parsers
-    add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, status, report
+    add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
+    #                               presets, report
 
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)

@@ -1,6 +1,6 @@
 """The print server's command line (docs/server.md): `serve`, and the clients of its local
-API — `submit`, `queue`, `cancel`, `hold`, `release`, `status`, `report` — plus
-`progress()`, a text progress bar for batch commands.
+API — `submit`, `queue`, `cancel`, `hold`, `release`, `requeue`, `status`, `presets`,
+`report` — plus `progress()`, a text progress bar for batch commands.
 
 app/cli.py calls `add_parser(sub)`; `python -m wideprint.app.server_cli ...` runs these
 commands on their own.
@@ -134,6 +134,16 @@ class Client:
     def pause_queue(self, paused: bool) -> dict:
         return self.request("POST", "/v1/queue", body={"paused": paused})
 
+    def presets(self) -> dict:
+        """{presets, file, loaded, error}: the presets in use (error: the file could not
+        be re-read)."""
+        return self.request("GET", "/v1/presets")
+
+    def reload_presets(self) -> dict:
+        """Re-read the presets file now: {presets, file, loaded, added, removed, changed};
+        ApiError naming the file and the problem when it is broken."""
+        return self.request("POST", "/v1/presets/reload")
+
     def report_csv(self, job_id: int | None = None) -> str:
         return self.request("GET", "/v1/report?format=csv" + (f"&job={job_id}" if job_id else ""),
                             raw=True)
@@ -205,6 +215,11 @@ def cmd_serve(args) -> int:
                        profile_path=args.profile)
     if args.max_file_size is not None:
         cfg.max_file_bytes = args.max_file_size
+    if args.keep_failed is not None:
+        if not args.keep_failed >= 0:            # negative or NaN
+            print("wideprint serve: --keep-failed must be 0 or more days", file=sys.stderr)
+            return EXIT_USAGE
+        cfg.keep_failed_s = args.keep_failed * 86400
     try:
         return serve(cfg)
     except (ValueError, OSError) as exc:
@@ -300,6 +315,7 @@ def cmd_queue(args) -> int:
         print(f"{j['id']:>6} {j['state']:9} {j.get('position') or '':>4} {j['priority']:>4} "
               f"{passes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
               f"{j['source']:12.12} {_age(j['submitted']):9} {j['name']}"
+              + (f" (attempt {j['attempt']})" if j.get("attempt", 1) > 1 else "")
               + (f"  [{j['message']}]" if j["message"] else ""))
     return EXIT_OK
 
@@ -342,11 +358,41 @@ def cmd_status(args) -> int:
     print(f"printer  {p['state']}" + (f": {p['error']}" if p["error"] else ""))
     counts = ", ".join(f"{k} {v}" for k, v in q["counts"].items())
     print(f"queue    {'PAUSED (' + q['reason'] + ')' if q['paused'] else 'running'}; {counts}")
+    pr = st.get("presets")
+    if pr:
+        print(f"presets  {', '.join(pr['names'])} ({pr['file']})"
+              + (f"; NOT RE-READ: {pr['error']}" if pr["error"] else ""))
     if cur:
         print(f"current  job {cur['id']} {cur['name']}: {cur['state']}"
               f"{' ' + cur['detail'] if cur['detail'] else ''}, pass "
               f"{cur['passes_printed']}/{cur['passes_total']}, copy {cur['copy']}/{cur['copies']}"
               + (" (resumed)" if cur.get("resumed") else ""))
+    return EXIT_OK
+
+
+def cmd_presets(args) -> int:
+    try:
+        client = _client(args)
+        if args.reload:
+            r = client.reload_presets()
+            changes = "; ".join(f"{k} {', '.join(r[k])}" for k in ("added", "removed", "changed")
+                                if r[k])
+            # the server also re-reads a changed file by itself: then this finds nothing new
+            print(f"re-read {r['file']}: "
+                  + (changes or f"no change (the presets in use date from {_age(r['loaded'])})"),
+                  file=sys.stderr if args.json else sys.stdout)
+        else:
+            r = client.presets()
+    except ApiError as exc:
+        return _fail("presets", exc)
+    if r.get("error"):                     # changed on disk but broken: these are the old ones
+        print(f"wideprint presets: {r['error']}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(r["presets"], indent=2))
+        return EXIT_OK
+    for name, settings in sorted(r["presets"].items()):
+        print(f"{name:12} " + (", ".join(f"{k}={json.dumps(v)}" for k, v in settings.items())
+                               or "(the RIP's defaults)"))
     return EXIT_OK
 
 
@@ -390,8 +436,8 @@ def _client_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
 
 
 def add_parser(sub) -> None:
-    """Add serve, submit, queue, cancel, hold, release, status and report to the
-    `wideprint` command's subparsers."""
+    """Add serve, submit, queue, cancel, hold, release, requeue, status, presets and report
+    to the `wideprint` command's subparsers."""
     from ..driver.server import DEFAULT_PORT
     from ..rip.halftone import METHODS
 
@@ -414,6 +460,9 @@ def add_parser(sub) -> None:
                    help="largest file accepted (default 4 GiB)")
     p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",
                    help="hot-folder scan interval (default 1 s)")
+    p.add_argument("--keep-failed", type=float, metavar="DAYS",
+                   help="keep the spooled files of failed and cancelled jobs this long, so "
+                        "they can be requeued (default 7; 0 = delete them at once)")
     p.add_argument("--paused", action="store_true",
                    help="start with the queue paused (jobs are accepted, none printed)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
@@ -447,7 +496,9 @@ def add_parser(sub) -> None:
     p.set_defaults(func=cmd_queue)
 
     for name, help in (("cancel", "cancel jobs (a printing job stops at once)"),
-                       ("hold", "hold queued jobs"), ("release", "release held jobs")):
+                       ("hold", "hold queued jobs"), ("release", "release held jobs"),
+                       ("requeue", "put failed or cancelled jobs back in the queue "
+                                   "(they print again from the start)")):
         p = _client_parser(sub, name, help)
         p.add_argument("ids", nargs="+", type=int, metavar="ID")
         p.set_defaults(func=_job_action(name))
@@ -458,6 +509,12 @@ def add_parser(sub) -> None:
     g.add_argument("--pause", action="store_true", help="pause the queue (no new job starts)")
     g.add_argument("--resume", action="store_true", help="resume the queue")
     p.set_defaults(func=cmd_status)
+
+    p = _client_parser(sub, "presets", "the server's settings presets")
+    p.add_argument("--reload", action="store_true",
+                   help="re-read the presets file now (it is also re-read when it changes)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_presets)
 
     p = _client_parser(sub, "report", "accounting: one row per printed copy")
     p.add_argument("--csv", metavar="FILE", help="write the CSV here")

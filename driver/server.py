@@ -10,6 +10,9 @@ One process owns the printer (one Device, re-opened after link errors) and its q
 - the hot-folder scanner: one folder per preset; a completely written file becomes a job,
   and moves to done/ or failed/ (with NAME.reason.txt) when the job ends.
 
+The presets (`Presets`) are re-read when their file changes, without a restart; a broken
+file keeps the presets in use.
+
 Nothing here trusts its inputs: names, JSON, sizes and file types are checked (see
 `validate_*`, `HotFolders`), and a file that cannot be ripped fails its own job only.
 """
@@ -27,6 +30,7 @@ import os
 import secrets
 import signal
 import stat
+import struct
 import threading
 import time
 import uuid
@@ -237,34 +241,122 @@ def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None) -> d
     return req
 
 
-def load_presets(state_dir: Path, profile) -> dict:
-    """presets.toml or presets.json in the state dir ({name: settings}); written with
-    the defaults on first start."""
+def preset_file(state_dir: Path) -> Path | None:
+    """The presets file in use: presets.toml, else presets.json (None: neither exists)."""
     for fname in PRESET_FILES:
         p = state_dir / fname
         if p.exists():
-            text = p.read_text()
-            if fname.endswith(".toml"):
-                import tomllib
-                raw = tomllib.loads(text)
-            else:
-                raw = json.loads(text)
-            break
-    else:
-        raw = DEFAULT_PRESETS
-        (state_dir / "presets.json").write_text(json.dumps(raw, indent=2) + "\n")
+            return p
+    return None
+
+
+def read_presets(path: Path, profile, icc_dir: Path) -> dict:
+    """One presets file ({name: settings}), every preset checked like the API's settings;
+    ValueError naming the file and the problem."""
+    try:
+        text = path.read_text()
+        if path.suffix == ".toml":
+            import tomllib
+            raw = tomllib.loads(text)
+        else:
+            raw = json.loads(text)
+    except OSError as exc:
+        raise ValueError(f"{path}: {exc.strerror}") from None
+    except ValueError as exc:                  # TOML / JSON syntax, bad UTF-8
+        raise ValueError(f"{path}: {exc}") from None
     if not isinstance(raw, dict):
-        raise ValueError("presets: expected a table of presets")
+        raise ValueError(f"{path}: expected a table of presets")
     presets = {}
     for name, settings in raw.items():
         try:
             validate_name(name)
             if name in ("done", "failed"):
                 raise Invalid("reserved for the hot folders' done/ and failed/")
-            presets[name] = validate_settings(settings, profile, state_dir / "icc")
+            presets[name] = validate_settings(settings, profile, icc_dir)
         except Invalid as exc:
-            raise ValueError(f"preset {name!r}: {exc}") from None
+            raise ValueError(f"{path}: preset {name!r}: {exc}") from None
     return presets
+
+
+def load_presets(state_dir: Path, profile) -> dict:
+    """presets.toml or presets.json in the state dir ({name: settings}); written with
+    the defaults on first start."""
+    path = preset_file(state_dir)
+    if path is None:
+        path = state_dir / "presets.json"
+        path.write_text(json.dumps(DEFAULT_PRESETS, indent=2) + "\n")
+    return read_presets(path, profile, state_dir / "icc")
+
+
+class Presets:
+    """The server's presets, kept in step with their file without a restart (docs/server.md,
+    "Presets are re-read without a restart"): `get()` compares the file's stat signature
+    with the one last read (one stat: cheap enough for every request and scan) and
+    re-reads it when it changed; `reload()` re-reads on demand.  A file that cannot be read or has an invalid preset is
+    logged and reported (`error`) and the presets in use are kept — a typo in the file
+    never stops the server or the jobs that use the other presets.  At start-up there is
+    nothing to keep, so there a broken file is fatal (as before)."""
+
+    def __init__(self, state_dir: Path, profile):
+        self.state_dir, self.profile = state_dir, profile
+        self._lock = threading.Lock()
+        self._sig = self._signature()          # before reading: a later write is seen
+        self.current = load_presets(state_dir, profile)
+        self.path = preset_file(state_dir)
+        self.loaded = time.time()
+        self.error = ""
+
+    def _signature(self):
+        # mtime alone misses two writes within the clock's granularity; size and inode
+        # (editors that write a new file and rename it) catch most of those
+        path = preset_file(self.state_dir)
+        try:
+            st = path.stat() if path else None
+        except OSError:
+            st = None
+        return None if st is None else (path.name, st.st_mtime_ns, st.st_size, st.st_ino)
+
+    def get(self) -> dict:
+        """The presets now, re-read first if the file changed since it was last read."""
+        if self._signature() != self._sig:
+            try:
+                self.reload(only_if_changed=True)
+            except ValueError:
+                pass                           # logged, kept in `error`; the old ones stay
+        return self.current
+
+    def reload(self, only_if_changed: bool = False) -> dict:
+        """Re-read the file: returns {added, removed, changed} preset names, or raises
+        ValueError naming the file and the problem (the presets in use are kept, and the
+        broken file is not read again until it changes or `reload` is asked for)."""
+        with self._lock:
+            sig = self._signature()            # before reading: a later write is seen next time
+            if only_if_changed and sig == self._sig:
+                return dict(added=[], removed=[], changed=[])   # another thread just did it
+            path = preset_file(self.state_dir)
+            try:
+                if path is None:
+                    raise ValueError(f"{self.state_dir}: no presets file "
+                                     f"({' or '.join(PRESET_FILES)})")
+                new = read_presets(path, self.profile, self.state_dir / "icc")
+            except ValueError as exc:
+                self._sig, self.error = sig, f"{exc}; the presets in use are kept"
+                log.error("presets: %s", self.error)
+                raise ValueError(self.error) from None
+            old, self.current = self.current, new
+            self._sig, self.path, self.error = sig, path, ""
+            diff = dict(added=sorted(set(new) - set(old)), removed=sorted(set(old) - set(new)),
+                        changed=sorted(n for n in set(new) & set(old) if new[n] != old[n]))
+            if any(diff.values()):
+                self.loaded = time.time()      # when the presets in use took effect
+        if any(diff.values()):
+            log.info("presets re-read from %s: %s", path,
+                     "; ".join(f"{k} {', '.join(v)}" for k, v in diff.items() if v))
+        return diff
+
+    def info(self) -> dict:
+        return dict(file=str(self.path) if self.path else None, names=sorted(self.current),
+                    loaded=self.loaded, error=self.error or None)
 
 
 def ensure_token(state_dir: Path) -> str:
@@ -317,6 +409,7 @@ class ServerConfig:
     start_paused: bool = False
     profile_path: str | None = None
     reconnect_backoff: tuple = (0.5, 30.0)
+    keep_failed_s: float = 7 * 86400       # spool copies of failed/cancelled jobs (requeue)
 
 
 # -- the worker -------------------------------------------------------------------------------
@@ -338,6 +431,7 @@ class Worker(threading.Thread):
         self.job = None                    # the PrintJob now running
         self._cancel: set[int] = set()
         self._backoff = server.config.reconnect_backoff[0]
+        self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
 
     # control from other threads
     def notify(self) -> None:
@@ -359,6 +453,10 @@ class Worker(threading.Thread):
             job.control.cancel()
         return True
 
+    def forget_cancel(self, job_id: int) -> None:
+        """A requeued job: a cancel meant for its earlier attempt must not stop this one."""
+        self._cancel.discard(job_id)
+
     def interrupt(self, timeout: float) -> None:
         """Server shutdown: the running job pauses at its next pass boundary (its
         checkpoint is saved), so a restart resumes it; the worker takes nothing new."""
@@ -375,6 +473,12 @@ class Worker(threading.Thread):
     # the loop
     def run(self) -> None:
         while not self.stopping:
+            if time.monotonic() >= self._next_expiry:
+                self._next_expiry = time.monotonic() + 60
+                try:
+                    self.srv.expire_spool()
+                except Exception:  # noqa: BLE001 - housekeeping must not end the worker
+                    log.exception("expiring spool copies")
             job = None
             if not self.paused:
                 try:
@@ -418,7 +522,7 @@ class Worker(threading.Thread):
 
     def _offline(self, job_id: int, message: str) -> None:
         self.printer_state, self.printer_error = "offline", message
-        self.spool.requeue(job_id, f"waiting for the printer: {message}")
+        self.spool.wait_for_printer(job_id, f"waiting for the printer: {message}")
         log.warning("printer offline: %s (retrying in %.1f s)", message, self._backoff)
         with self.wake:
             self.wake.wait(self._backoff)
@@ -428,7 +532,7 @@ class Worker(threading.Thread):
         from ..rip.load import ImageError
         from ..rip.pipeline import RipJob, RipSettings
         from .job import JobCancelled, JobError, PrintJob
-        from .link import LinkError
+        from .link import DeviceError, LinkError
         from .stream import StreamError
 
         job = self.spool.claim(job_id)
@@ -471,8 +575,15 @@ class Worker(threading.Thread):
             try:
                 try:
                     dev = self._device()
+                    if cp is None and copy == 1 and job["attempt"] > 1:
+                        self._close_earlier_attempt(dev, job_id)
                 except (LinkError, OSError, ValueError) as exc:
                     self._offline(job_id, str(exc))
+                    return
+                except DeviceError as exc:
+                    msg = f"ending the earlier attempt on the printer: {exc}"
+                    self._account(job, copy, started, None, "failed", msg, resumed)
+                    self._finish(job, "failed", msg)
                     return
                 epoch = job.get("epoch") or self.spool.epoch()
 
@@ -522,11 +633,25 @@ class Worker(threading.Thread):
             job = self.spool.copy_done(job_id)
         self._finish(job, "done", "")
 
+    @staticmethod
+    def _close_earlier_attempt(dev, job_id: int) -> None:
+        """A requeued job prints afresh under the same printer job id.  Its earlier attempt
+        failed or was cancelled without JOB_END, so the printer may still hold it open, and
+        would take the new JOB_BEGIN (same id, same image area) for the host reconnecting:
+        keep the old placement's media and paper position.  End it first (docs/server.md,
+        "Requeue")."""
+        from . import protocol as P
+        dev.connect()
+        if dev.link.status().flags & P.FLAG_JOB_OPEN:
+            dev.link.command(P.Op.JOB_END, struct.pack("<I", job_id))
+
     def _finish(self, job: dict, state: str, message: str) -> None:
         self.srv.hot_done(job, state, message)
-        self.spool.finish(job["id"], state, message)
+        keep = self.srv.keeps_copy(state)
+        self.spool.finish(job["id"], state, message, keep_copy=keep)
+        self._cancel.discard(job["id"])
         path = job.get("spool_path")
-        if path:
+        if path and not keep:
             try:
                 os.unlink(path)
             except OSError:
@@ -547,7 +672,7 @@ class Worker(threading.Thread):
                    width_dots=r.get("width_dots", 0), height_rows=r.get("height_rows", 0),
                    area_m2=r.get("area_m2", 0.0), outcome=outcome, message=message,
                    resumed=int(bool(resumed)), recoveries=r.get("recoveries", 0),
-                   retries=r.get("retries", 0))
+                   retries=r.get("retries", 0), attempt=job["attempt"])
         for c, d in zip(COLORS, drops):
             row[f"drops_{c}"] = d
             row[f"ink_{c}_ml"] = round(d * pl * 1e-9, 12)
@@ -605,9 +730,16 @@ class HotFolders(threading.Thread):
         self.seen: dict[str, tuple] = {}
         self.stopping = threading.Event()
         self.lock = threading.Lock()
-        for preset in server.presets:
+        self.made: set[str] = set()
+        self.make_folders(server.presets)
+
+    def make_folders(self, presets) -> None:
+        """ROOT/PRESET/{done,failed}/ for presets that have none yet (start-up, and
+        presets added to the file later).  A removed preset's folder is left as it is."""
+        for preset in set(presets) - self.made:
             for sub in ("", "done", "failed"):
-                (root / preset / sub).mkdir(parents=True, exist_ok=True)
+                (self.root / preset / sub).mkdir(parents=True, exist_ok=True)
+            self.made.add(preset)
 
     def run(self) -> None:
         while not self.stopping.wait(self.srv.config.scan_interval):
@@ -622,10 +754,12 @@ class HotFolders(threading.Thread):
         return name.startswith(".") or low.endswith(IGNORED_SUFFIXES) or name.startswith("~$")
 
     def scan_once(self) -> None:
+        presets = self.srv.presets             # re-read first if the file changed
         with self.lock:
+            self.make_folders(presets)
             active = self.srv.spool.active_hot_paths()
             present = set()
-            for preset in self.srv.presets:
+            for preset, settings in presets.items():
                 folder = self.root / preset
                 try:
                     entries = list(os.scandir(folder))
@@ -645,11 +779,12 @@ class HotFolders(threading.Thread):
                     if stat.S_ISDIR(st.st_mode):
                         continue                       # done/, failed/, a folder being copied
                     present.add(path)
-                    self._consider(preset, folder, e.name, path, st)
+                    self._consider(preset, settings, folder, e.name, path, st)
             for gone in set(self.seen) - present:
                 del self.seen[gone]
 
-    def _consider(self, preset: str, folder: Path, name: str, path: str, st) -> None:
+    def _consider(self, preset: str, settings: dict, folder: Path, name: str, path: str,
+                  st) -> None:
         if stat.S_ISLNK(st.st_mode):
             target = os.path.realpath(path)
             inside = target.startswith(str(folder.resolve()) + os.sep)
@@ -695,7 +830,7 @@ class HotFolders(threading.Thread):
             os.close(fd)
         job, _ = self.srv.spool.add_job(name=name, source=f"hot:{preset}", spool_path=spool_path,
                                         size=size, sha256=digest,
-                                        settings=dict(self.srv.presets[preset]), preset=preset,
+                                        settings=dict(settings), preset=preset,
                                         client="hot-folder", hot_path=path)
         log.info("hot folder %s: %s is job %s", preset, name, job["id"])
         self.srv.worker.notify()
@@ -806,7 +941,12 @@ class ApiHandler(BaseHTTPRequestHandler):
                 after = int(query.get("after", ["0"])[0])
                 return self._json(200, {"jobs": self.srv.jobs(states, limit, after)})
             if method == "GET" and route == ["presets"]:
-                return self._json(200, {"presets": self.srv.presets})
+                presets = self.srv.presets
+                return self._json(200, dict(self.srv.preset_source.info(), presets=presets))
+            if method == "POST" and route == ["presets", "reload"]:
+                if body:
+                    raise Invalid("reload takes no parameters")
+                return self._json(200, self.srv.reload_presets())
             if method == "GET" and route == ["report"]:
                 job = int(query["job"][0]) if "job" in query else None
                 if query.get("format", ["json"])[0] == "csv":
@@ -834,7 +974,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                     pr = _check_int("priority", body["priority"], *PRIORITY_RANGE)
                     job = self.srv.spool.set_priority(job_id, pr)
                     return self._json(200, {"job": self.srv.public(job)})
-                if method == "POST" and len(route) == 3 and route[2] in ("cancel", "hold", "release"):
+                if method == "POST" and len(route) == 3 and route[2] in ("cancel", "hold", "release",
+                                                                          "requeue"):
                     if body:
                         raise Invalid(f"{route[2]} takes no parameters")
                     job = getattr(self.srv, route[2])(job_id)
@@ -920,7 +1061,7 @@ class PrintServer:
         if config.media_dir:
             Path(config.media_dir).mkdir(parents=True, exist_ok=True)
         self.profile = load_profile(config.profile_path)
-        self.presets = load_presets(self.state_dir, self.profile)
+        self.preset_source = Presets(self.state_dir, self.profile)
         self.token = ensure_token(self.state_dir)
         self.spool = Spool(self.state_dir)
         self.started = time.time()
@@ -928,6 +1069,7 @@ class PrintServer:
         for job in self.recovered:
             log.warning("job %s: %s", job["id"], job["message"])
         self._clean_spool()
+        self.expire_spool()
         self.worker = Worker(self)
         self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
         handler = type("Handler", (ApiHandler,), {"srv": self})
@@ -950,6 +1092,39 @@ class PrintServer:
                     p.unlink()
                 except OSError:
                     pass
+
+    def expire_spool(self) -> None:
+        """Spool copies of failed and cancelled jobs older than --keep-failed go (those
+        jobs can no longer be requeued)."""
+        for path in self.spool.expire_copies(time.time() - self.config.keep_failed_s):
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+
+    def keeps_copy(self, state: str) -> bool:
+        """Whether a job ending in `state` keeps its spool copy: failed and cancelled jobs
+        do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0."""
+        return state in ("failed", "cancelled") and self.config.keep_failed_s > 0
+
+    @property
+    def presets(self) -> dict:
+        """The presets now (re-read first when their file changed)."""
+        return self.preset_source.get()
+
+    def reload_presets(self) -> dict:
+        """Re-read the presets file (API `POST /v1/presets/reload`): the presets, what
+        changed, and the hot folders of new presets made at once.  A broken file raises
+        Invalid naming the file and the problem; the presets in use stay."""
+        try:
+            diff = self.preset_source.reload()
+        except ValueError as exc:
+            raise Invalid(str(exc)) from None
+        presets = self.preset_source.current
+        if self.hot:
+            with self.hot.lock:
+                self.hot.make_folders(presets)
+        return dict(self.preset_source.info(), presets=presets, **diff)
 
     def start(self) -> None:
         self.worker.start()
@@ -1031,7 +1206,8 @@ class PrintServer:
 
     def cancel(self, job_id: int) -> dict:
         before = self.spool.get(job_id)
-        job = self.spool.cancel_waiting(job_id)
+        keep = self.keeps_copy("cancelled")
+        job = self.spool.cancel_waiting(job_id, keep_copy=keep)
         if job is None:                                # printing: stop it at the printer
             if not self.worker.cancel(job_id):
                 # claimed but not started yet, or between copies: the worker checks this set
@@ -1044,7 +1220,7 @@ class PrintServer:
                 time.sleep(0.05)
             return job
         self.hot_done(job, "cancelled", "cancelled by the operator")
-        if before and before.get("spool_path"):
+        if before and before.get("spool_path") and not keep:
             try:
                 os.unlink(before["spool_path"])
             except OSError:
@@ -1057,6 +1233,17 @@ class PrintServer:
 
     def release(self, job_id: int) -> dict:
         job = self.spool.release(job_id)
+        self.worker.notify()
+        return job
+
+    def requeue(self, job_id: int) -> dict:
+        """A failed or cancelled job back in the queue, to print afresh (docs/server.md,
+        "Requeue"); refused, with the reason, for other states or a spool copy gone."""
+        before = self.spool.get(job_id)
+        if before is not None and before["state"] in ("failed", "cancelled"):
+            self.worker.forget_cancel(job_id)      # a late cancel of the ended attempt
+        job = self.spool.requeue(job_id)
+        log.info("job %s requeued (attempt %s)", job_id, job["attempt"])
         self.worker.notify()
         return job
 
@@ -1076,6 +1263,7 @@ class PrintServer:
 
     def status(self) -> dict:
         w = self.worker
+        self.preset_source.get()                     # the status reports the file as it is now
         cur = dict(w.current) if w.current else None
         if cur is not None and w.job is not None:
             t = w.job.telemetry
@@ -1087,6 +1275,7 @@ class PrintServer:
                                 on_crash=self.config.on_crash,
                                 hot_folder_root=str(self.config.hot_folder_root or "") or None),
                     queue=dict(paused=w.paused, reason=w.pause_reason, counts=self.spool.counts()),
+                    presets=self.preset_source.info(),
                     printer=dict(state=w.printer_state, error=w.printer_error),
                     current=cur)
 
@@ -1099,7 +1288,7 @@ CSV_COLUMNS = ["print_id", "job_id", "copy", "file", "source", "preset", "settin
                "passes_total", "passes_printed", "width_dots", "height_rows", "area_m2",
                "drops_c", "drops_m", "drops_y", "drops_k",
                "ink_c_ml", "ink_m_ml", "ink_y_ml", "ink_k_ml", "ink_total_ml",
-               "outcome", "message", "resumed", "recoveries", "retries"]
+               "outcome", "message", "resumed", "recoveries", "retries", "attempt"]
 
 
 def _iso(t: float) -> str:
@@ -1120,7 +1309,8 @@ def prints_csv(rows: list[dict]) -> str:
                     r["passes_total"], r["passes_printed"], r["width_dots"], r["height_rows"],
                     f"{r['area_m2']:.10f}", *(r[f"drops_{c}"] for c in COLORS),
                     *(f"{v:.9f}" for v in ink), f"{sum(ink):.9f}",
-                    r["outcome"], r["message"], r["resumed"], r["recoveries"], r["retries"]])
+                    r["outcome"], r["message"], r["resumed"], r["recoveries"], r["retries"],
+                    r["attempt"]])
     return out.getvalue()
 
 

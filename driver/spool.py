@@ -1,6 +1,7 @@
 """The print server's persistent queue (docs/server.md): jobs, their settings, state and
 checkpoint, and the accounting of every print, in one SQLite database (WAL) in the state
-directory; each queued job keeps a private copy of its file in `spool/`.
+directory; each queued job keeps a private copy of its file in `spool/` (failed and
+cancelled jobs keep theirs for a while, so the operator can requeue them).
 
 Every thread uses its own connection (`Spool.db`); state transitions run in
 `BEGIN IMMEDIATE` transactions so two threads never both take the same job.  The database
@@ -34,7 +35,7 @@ CREATE TABLE IF NOT EXISTS jobs (
     name         TEXT NOT NULL,               -- file name as submitted (a plain name)
     source       TEXT NOT NULL,               -- api, hot:PRESET, cups
     client       TEXT,                        -- free client tag (user, host, CUPS user)
-    spool_path   TEXT,                        -- the private copy (NULL once the job left the queue)
+    spool_path   TEXT,                        -- the private copy (NULL once deleted)
     size         INTEGER NOT NULL,
     sha256       TEXT NOT NULL,
     preset       TEXT,
@@ -52,7 +53,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     copy_started REAL,                        -- start of the copy now printing
     passes_total INTEGER NOT NULL DEFAULT 0,
     passes_done  INTEGER NOT NULL DEFAULT 0,
-    checkpoint   TEXT                         -- JSON: x0, paper0, next_pass, epoch
+    checkpoint   TEXT,                        -- JSON: x0, paper0, next_pass, epoch
+    attempt      INTEGER NOT NULL DEFAULT 1   -- 1, then +1 each time the operator requeues it
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -79,12 +81,16 @@ CREATE TABLE IF NOT EXISTS prints (
     message        TEXT NOT NULL DEFAULT '',
     resumed        INTEGER NOT NULL DEFAULT 0,-- 1: finished after a server restart
     recoveries     INTEGER NOT NULL DEFAULT 0,
-    retries        INTEGER NOT NULL DEFAULT 0
+    retries        INTEGER NOT NULL DEFAULT 0,
+    attempt        INTEGER NOT NULL DEFAULT 1 -- the job's attempt this copy belongs to
 );
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
 """
 
-SCHEMA_VERSION = "1"
+SCHEMA_VERSION = "2"
+# columns added since schema 1: (table, column, definition), added to older databases
+ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
+                 ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"))
 
 
 class SpoolError(Exception):
@@ -118,7 +124,11 @@ class Spool:
             for stmt in SCHEMA.split(";"):
                 if stmt.strip():
                     c.execute(stmt)
-            c.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
+            for table, column, definition in ADDED_COLUMNS:
+                have = {r[1] for r in c.execute(f"PRAGMA table_info({table})")}
+                if column not in have:
+                    c.execute(f"ALTER TABLE {table} ADD COLUMN {column} {definition}")
+            c.execute("INSERT OR REPLACE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
             c.execute("INSERT OR IGNORE INTO meta VALUES ('printer_epoch', '0')")
 
     # -- connections and transactions ---------------------------------------------------
@@ -264,15 +274,17 @@ class Spool:
             c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
             c.execute("UPDATE jobs SET copy_started=?, passes_done=0 WHERE id=?", (now, job_id))
 
-    def finish(self, job_id: int, state: str, message: str = "") -> dict:
+    def finish(self, job_id: int, state: str, message: str = "", keep_copy: bool = False) -> dict:
+        """The job ended.  keep_copy: its spool copy stays (a failed or cancelled job the
+        operator may requeue); otherwise the caller deletes the file."""
         assert state in FINAL
         with self.tx() as c:
             c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, "
-                      "checkpoint=NULL, spool_path=NULL WHERE id=?",
-                      (state, message, time.time(), job_id))
+                      "checkpoint=NULL, spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
+                      (state, message, time.time(), int(keep_copy), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
-    def requeue(self, job_id: int, message: str) -> None:
+    def wait_for_printer(self, job_id: int, message: str) -> None:
         """The printer could not be reached: the job waits at the head of the queue with
         its checkpoint (the printer keeps its state), as after a crash."""
         with self.tx() as c:
@@ -307,9 +319,9 @@ class Spool:
             c.execute("UPDATE jobs SET priority=? WHERE id=?", (priority, job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
-    def cancel_waiting(self, job_id: int) -> dict | None:
+    def cancel_waiting(self, job_id: int, keep_copy: bool = False) -> dict | None:
         """Cancel a queued or held job at once; returns None when it is printing (the
-        worker cancels it at the printer)."""
+        worker cancels it at the printer).  keep_copy as for `finish`."""
         with self.tx() as c:
             job = self._get_for_change(c, job_id)
             if job["state"] == "printing":
@@ -317,9 +329,50 @@ class Spool:
             if job["state"] in FINAL:
                 raise SpoolError(f"job {job_id} is already {job['state']}")
             c.execute("UPDATE jobs SET state='cancelled', message='cancelled by the operator', "
-                      "finished=?, interrupted=0, checkpoint=NULL, spool_path=NULL WHERE id=?",
-                      (time.time(), job_id))
+                      "finished=?, interrupted=0, checkpoint=NULL, "
+                      "spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
+                      (time.time(), int(keep_copy), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def requeue(self, job_id: int) -> dict:
+        """The operator puts a failed or cancelled job back in the queue (docs/server.md,
+        "Requeue"): a fresh print of its spooled copy, from its first pass, with the same
+        settings, preset, copies and priority, as attempt N+1.  Its `prints` rows stay."""
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] not in ("failed", "cancelled"):
+                hint = "; submit the file again to reprint it" if job["state"] == "done" else ""
+                raise SpoolError(f"job {job_id} is {job['state']}: only a failed or cancelled "
+                                 f"job can be requeued{hint}")
+            path = job["spool_path"]
+            if path is None:
+                raise SpoolError(f"job {job_id}: its spooled file is gone (copies of failed and "
+                                 f"cancelled jobs are deleted after the server's --keep-failed "
+                                 f"time); submit the file again", 410)
+            try:
+                size = os.stat(path).st_size
+            except FileNotFoundError:
+                raise SpoolError(f"job {job_id}: its spooled file is gone ({path} was deleted); "
+                                 f"submit the file again", 410) from None
+            if size != job["size"]:
+                raise SpoolError(f"job {job_id}: its spooled file is damaged ({size} bytes, "
+                                 f"{job['size']} submitted); submit the file again")
+            # hot_path: the original already went to failed/ with the first attempt's reason;
+            # the new attempt moves no hot-folder file (a new file of that name is a new job)
+            c.execute("UPDATE jobs SET state='queued', attempt=attempt+1, message='', "
+                      "copies_done=0, passes_done=0, passes_total=0, checkpoint=NULL, "
+                      "interrupted=0, started=NULL, finished=NULL, copy_started=NULL, "
+                      "hot_path=NULL WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def expire_copies(self, before: float) -> list[str]:
+        """Forget the spool copies of jobs that failed or were cancelled before `before`
+        (they can no longer be requeued); returns the paths for the caller to delete."""
+        with self.tx() as c:
+            rows = c.execute("SELECT id, spool_path FROM jobs WHERE state IN ('failed','cancelled') "
+                             "AND spool_path IS NOT NULL AND finished < ?", (before,)).fetchall()
+            c.executemany("UPDATE jobs SET spool_path=NULL WHERE id=?", [(r[0],) for r in rows])
+        return [r[1] for r in rows]
 
     @staticmethod
     def _get_for_change(c, job_id: int) -> dict:

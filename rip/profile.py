@@ -8,12 +8,12 @@ columns at the dpi mode's pitch (encoder counts / k), rows at half the nozzle pi
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import tomlkit
 
 RESOURCES = Path(__file__).resolve().parent.parent / "resources"
 DEFAULT_PROFILE = RESOURCES / "printers" / "default.toml"
@@ -223,28 +223,68 @@ def _validate(p: Profile) -> None:
 
 
 def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | None = None,
-                     head_x_counts: dict[str, int] | None = None) -> Profile:
-    """Write alignment results into a profile file, keeping its comments and layout, and
-    return the reloaded profile (which validates them)."""
+                     head_x_counts: dict[str, int] | None = None,
+                     dead_nozzles=None) -> Profile:
+    """Write calibration results into a profile file, keeping its comments and layout
+    (tomlkit edits the document in place), and return the reloaded profile, which
+    validates them; a result that does not load leaves the file as it was.
+
+    bidir_offset_columns: {dpi: columns}, the whole table.  head_x_counts: {head: counts}.
+    dead_nozzles: the complete new list of dead nozzles, as (head name, nozzle) pairs or
+    {"head": ..., "nozzle": ...} tables (None leaves the list alone, an empty list clears
+    it); written as `dead_nozzles = [{ head = "M1", nozzle = 57 }, ...]` in [layout]."""
     path = Path(path)
-    text = path.read_text()
-    if bidir_offset_columns is not None:
-        line = "bidir_offset_columns = { " + ", ".join(
-            f"{int(k)} = {int(v)}" for k, v in sorted(bidir_offset_columns.items())) + " }"
-        text, n = re.subn(r"(?m)^bidir_offset_columns\s*=.*$", line, text)
-        if n != 1:
-            raise ProfileError(f"{path}: no bidir_offset_columns line to update")
-    for name, counts in (head_x_counts or {}).items():
-        pattern = r'(\{\s*name\s*=\s*"' + re.escape(name) + r'"[^}]*?x_counts\s*=\s*)(-?\d+)'
-        text, n = re.subn(pattern, lambda m: m.group(1) + str(int(counts)), text)
-        if n != 1:
-            raise ProfileError(f"{path}: no head {name!r} to update")
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text)
     try:
-        prof = load_profile(tmp)
+        doc = tomlkit.parse(path.read_text())
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read the printer profile ({exc.strerror or exc})") from None
+    except tomlkit.exceptions.ParseError as exc:
+        raise ProfileError(f"{path}: not a valid TOML printer profile ({exc})") from None
+    layout = doc.get("layout")
+    if layout is None:
+        raise ProfileError(f"{path}: no [layout] table to update")
+    if bidir_offset_columns is not None:
+        table = layout.get("bidir_offset_columns")
+        if table is None:
+            raise ProfileError(f"{path}: no bidir_offset_columns to update")
+        new = {str(int(k)): int(v) for k, v in sorted(bidir_offset_columns.items())}
+        for key in [k for k in table if k not in new]:
+            del table[key]
+        table.update(new)
+    for name, counts in (head_x_counts or {}).items():
+        heads = [h for h in layout.get("heads", []) if h.get("name") == name]
+        if len(heads) != 1:
+            raise ProfileError(f"{path}: no head {name!r} to update")
+        heads[0]["x_counts"] = int(counts)
+    if dead_nozzles is not None:
+        dead = _dead_nozzle_list(path, dead_nozzles)
+        items = [f'{{ head = "{h}", nozzle = {z} }}' for h, z in dead]
+        value = ("[" + ", ".join(items) + "]" if len(items) <= 4 else       # one a line if many
+                 "[\n" + "".join(f"  {it},\n" for it in items) + "]")
+        layout["dead_nozzles"] = tomlkit.parse(f"v = {value}")["v"]
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(tomlkit.dumps(doc))
+    try:
+        load_profile(tmp)
     except ProfileError:
         tmp.unlink()
         raise
     tmp.replace(path)
     return load_profile(path)
+
+
+def _dead_nozzle_list(path: Path, entries) -> list[tuple[str, int]]:
+    """Checked, de-duplicated and sorted (head order, nozzle) dead nozzles."""
+    prof = load_profile(path)
+    index = {h.name: h.index for h in prof.heads}
+    out = set()
+    for e in entries:
+        head, nozzle = (e["head"], e["nozzle"]) if isinstance(e, dict) else e
+        if head not in index:
+            raise ProfileError(f"{path}: no head {head!r} (heads: {', '.join(index)})")
+        nozzle = int(nozzle)
+        if not 1 <= nozzle <= prof.nozzles - 2:
+            raise ProfileError(f"{path}: dead nozzle {head}:{nozzle}: nozzles are 1..{prof.nozzles - 2} "
+                               f"(0 and {prof.nozzles - 1} never fire)")
+        out.add((head, nozzle))
+    return sorted(out, key=lambda hn: (index[hn[0]], hn[1]))

@@ -151,6 +151,25 @@ def test_dead_nozzle_misses_exactly_its_dots(tmp_path, profile):
     assert np.array_equal(media, expected)
 
 
+def test_nozzle_check_fires_nozzles_the_profile_lists_as_dead(tmp_path, profile):
+    """A test print ignores the profile's dead list (one pass could not avoid them, and the
+    check must show whether a marked nozzle works again): a listed nozzle that works prints
+    its row, one that is really dead misses exactly its row."""
+    from test_swath import variant_profile
+    listed = variant_profile(tmp_path, dead=[("M1", 57), ("K2", 3)])
+    assert listed.dead_nozzles
+    job = PatternJob.for_pattern("nozzle-check", listed, 160)
+    planes = job.planes
+    run(job, listed, tmp_path / "m.tif", Faults(dead_nozzle=[("M1", 57)]))
+    media = read_planes(tmp_path / "m.tif")
+    m1 = next(h for h in profile.heads if h.name == "M1")
+    row = m1.y_rows + 2 * 57 - 2
+    expected = planes.copy()
+    expected[row, :, 1] = 0                        # M1:57 is really dead; K2:3 works again
+    assert planes[row, :, 1].any()
+    assert np.array_equal(media, expected)
+
+
 @pytest.mark.parametrize("faults,pattern_text", [
     (Faults(overtemp=[("K2", 0)]), r"over-temperature \(head K2, pass 0, column"),
     (Faults(paper_length_mm=5), r"paper out"),

@@ -2,7 +2,8 @@
 files added by the dialog's method and by drag and drop, settings changed through the
 widgets, jobs printed on the in-process emulator and the media compared dot for dot with
 the RIP's planes, a corrupt file failing its own row while the queue goes on, pause /
-resume / cancel within a second, the calibration loop, remembered settings."""
+resume / cancel within a second, the calibration loop (alignment, dead nozzles from the
+nozzle check), queue rows dragged to a new place, remembered settings."""
 
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ import pytest
 pytest.importorskip("PySide6")
 pytest.importorskip("pytestqt")
 
-from PySide6.QtCore import QMimeData, QPoint, QPointF, Qt, QUrl  # noqa: E402
-from PySide6.QtGui import QDragEnterEvent, QDropEvent  # noqa: E402
+from PySide6.QtCore import QByteArray, QItemSelectionModel, QMimeData, QPoint, QPointF, Qt, QUrl  # noqa: E402
+from PySide6.QtGui import QDragEnterEvent, QDragMoveEvent, QDropEvent  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
 from conftest import random_planes, write_cmyk_tiff  # noqa: E402
@@ -392,3 +393,229 @@ def test_emergency_stop_then_clear_fault_and_print_again(qtbot, tmp_path):
         win.print_queue()
     assert item.state == Q.DONE, item.message
     assert np.array_equal(read_planes(item.media[-1]), rip_planes(tmp_path, item, win))
+
+
+# -------------------------------------------------------------------------------------------
+# dragging queue rows
+
+def names_of(win) -> list[str]:
+    return [Path(i.path).stem for i in win.model.items]
+
+
+def select_rows(win, rows) -> None:
+    sm = win.table.selectionModel()
+    sm.clearSelection()
+    for r in rows:
+        sm.select(win.model.index(r, 0), QItemSelectionModel.Select | QItemSelectionModel.Rows)
+
+
+def drag_to(win, mime, row: int, half: str = "top"):
+    """Drag `mime` over the queue and drop it in the top or bottom half of `row` (a row past
+    the last: the empty space below the rows), through the view's own drag and drop
+    handlers (a real QDrag cannot run offscreen).  Returns (drag accepted, the row the
+    drop line was drawn above, drop accepted)."""
+    view = win.table
+    n = win.model.rowCount()
+    if row >= n:
+        y = view.rowViewportPosition(n - 1) + view.rowHeight(n - 1) + 6
+        assert y < view.viewport().height()
+    else:
+        y = view.rowViewportPosition(row) + view.rowHeight(row) * (0.25 if half == "top" else 0.75)
+    pos = QPoint(60, int(y))
+    with warnings.catch_warnings():      # the QPoint constructors are the only ones PySide6 has
+        warnings.simplefilter("ignore", DeprecationWarning)
+        enter = QDragEnterEvent(pos, Qt.MoveAction, mime, Qt.LeftButton, Qt.NoModifier)
+        move = QDragMoveEvent(pos, Qt.MoveAction, mime, Qt.LeftButton, Qt.NoModifier)
+    QApplication.sendEvent(view.viewport(), enter)
+    QApplication.sendEvent(view.viewport(), move)
+    line = view.drop_row
+    drop = QDropEvent(QPointF(pos), Qt.MoveAction, mime, Qt.LeftButton, Qt.NoModifier)
+    QApplication.sendEvent(view.viewport(), drop)
+    assert view.drop_row is None
+    return enter.isAccepted() and move.isAccepted(), line, drop.isAccepted()
+
+
+def test_queue_rows_are_dragged_to_a_new_place(qtbot, win, tmp_path):
+    paths = [write_cmyk_tiff(tmp_path / f"{n}.tif", random_planes(30, 40, seed=i))
+             for i, n in enumerate("abcde")]
+    win.add_files([str(p) for p in paths])
+    wait_ready(qtbot, win.model.items)
+    assert names_of(win) == list("abcde")
+    # one job, one row down: the same as Move down (which undoes it with Move up)
+    select_rows(win, [1])
+    assert drag_to(win, win.table.drag_mime(), 2, "bottom") == (True, 3, True)
+    assert names_of(win) == list("acbde")
+    assert [Path(i.path).stem for i in win.selected_items()] == ["b"]       # the selection follows
+    assert cell(win, win.model.items[2], 0) == "3"
+    win.actions_["up"].trigger()
+    assert names_of(win) == list("abcde")
+    # several jobs together, in their order, between two rows and to the end
+    select_rows(win, [4, 0, 2])
+    assert drag_to(win, win.table.drag_mime(), 1, "top") == (True, 1, True)
+    assert names_of(win) == list("acebd")
+    assert [Path(i.path).stem for i in win.selected_items()] == list("ace")
+    select_rows(win, [0, 3])
+    assert drag_to(win, win.table.drag_mime(), 9) == (True, 5, True)
+    assert names_of(win) == list("cedab")
+    # a drop where the jobs already are changes nothing
+    select_rows(win, [1])
+    assert drag_to(win, win.table.drag_mime(), 1, "bottom")[2] is False
+    assert names_of(win) == list("cedab")
+    # Qt's moveRows is the same move (rows 3..4 before row 0)
+    assert win.model.moveRows(win.model.index(0, 0).parent(), 3, 2, win.model.index(0, 0).parent(), 0)
+    assert names_of(win) == list("abced")
+    # other drags are not rows: image files dropped on the queue are added, not moved
+    extra = write_cmyk_tiff(tmp_path / "f.tif", random_planes(30, 40, seed=9))
+    md = QMimeData()
+    md.setUrls([QUrl.fromLocalFile(str(extra))])
+    assert drag_to(win, md, 0)[1] is None
+    assert names_of(win) == list("abcedf")
+
+
+def test_a_printing_job_keeps_its_place_and_drags_change_the_print_order(qtbot, win, tmp_path):
+    paths = [write_cmyk_tiff(tmp_path / f"{n}.tif", random_planes(30, 40, seed=i))
+             for i, n in enumerate("abcd")]
+    items = win.add_files([str(p) for p in paths])
+    wait_ready(qtbot, items)
+    a, b, c, d = items
+    started = []
+    win.worker.jobStarted.connect(lambda item_id, info: started.append(item_id))
+    with qtbot.waitSignal(win.queueFinished, timeout=LONG):
+        assert win.print_queue() == 4
+        # (no events are processed in this block, so a stays "Printing" while we look)
+        assert a.state == Q.PRINTING and [b.state, c.state, d.state] == [Q.WAITING] * 3
+        select_rows(win, [0])
+        assert win.table.drag_mime() is None                        # it cannot be dragged
+        assert not win.model.flags(win.model.index(0, 0)) & Qt.ItemIsDragEnabled
+        assert not win.actions_["down"].isEnabled()                 # nor moved by the buttons
+        win.move_selected(1)
+        assert not win.model.move_items([a.id], 3)
+        forged = QMimeData()                                        # nor by a hand-made drop
+        forged.setData(Q.QueueModel.MIME_TYPE, QByteArray(
+            f'{{"model": "{win.model._token}", "ids": [{a.id}]}}'.encode()))
+        assert drag_to(win, forged, 3, "bottom") == (False, None, False)
+        assert names_of(win) == list("abcd")
+        # the printing job and d selected: only d moves, to right after a
+        select_rows(win, [0, 3])
+        assert drag_to(win, win.table.drag_mime(), 1, "top") == (True, 1, True)
+        assert names_of(win) == list("adbc")
+        select_rows(win, [3])
+        assert win.actions_["up"].isEnabled()
+    assert [it.state for it in items] == [Q.DONE] * 4, [it.message for it in items]
+    assert started == [a.id, d.id, b.id, c.id]                      # what printed next
+
+
+# -------------------------------------------------------------------------------------------
+# dead nozzles from the nozzle check
+
+def dead_in(path) -> set[tuple[str, int]]:
+    prof = load_profile(path)
+    return {(prof.heads[h].name, z) for h, z in prof.dead_nozzles}
+
+
+def listed(dlg) -> list[str]:
+    return [dlg.dead_list.item(i).text() for i in range(dlg.dead_list.count())]
+
+
+def test_dead_nozzles_marked_after_the_nozzle_check_are_printed_around(qtbot, tmp_path):
+    cfg = tmp_path / "cfg"
+    user = cfg / "printers" / "user.toml"
+    win = make_window(qtbot, cfg, tmp_path / "media")
+    win.device.faults.setText("dead-nozzle=M1:57 dead-nozzle=K2:3")
+    win.device.faults.editingFinished.emit()
+    src = write_cmyk_tiff(tmp_path / "job.tif", random_planes(300, 240, density=0.35, seed=11))
+    choose(win.settings_panel.passes, 2)
+    (first,) = win.add_files([str(src)])
+    wait_ready(qtbot, [first])
+    with qtbot.waitSignal(win.queueFinished, timeout=LONG):
+        win.print_queue()
+    assert first.state == Q.DONE, first.message
+    planes = rip_planes(tmp_path, first, win)
+    lost = planes.astype(np.int16) - read_planes(first.media[0])
+    # not marked yet: the dead nozzles' dots are missing, in magenta and black, nothing else
+    assert lost.min() == 0 and lost.max() == 1
+    assert set(np.flatnonzero(lost.reshape(-1, 4).any(axis=0))) == {1, 3}
+
+    dlg = win.open_calibration()
+    choose(dlg.pattern, "nozzle-check")
+    assert listed(dlg) == [] and not dlg.save_btn.isEnabled()
+    qtbot.mouseClick(dlg.print_btn, Qt.LeftButton)
+    qtbot.waitUntil(lambda: dlg.media is not None or "failed" in dlg.status.text(), timeout=LONG)
+    assert "M1:57" in dlg.nozzle_result.text() and "K2:3" in dlg.nozzle_result.text()
+    # the operator marks one by hand (what works on a real printer) ...
+    choose(dlg.dead_head, "M1")
+    dlg.dead_nozzle.setValue(57)
+    qtbot.mouseClick(dlg.mark_btn, Qt.LeftButton)
+    assert listed(dlg) == ["M1:57"] and dlg.save_btn.isEnabled()
+    assert dlg.dead_nozzle.minimum() == 1 and dlg.dead_nozzle.maximum() == 126
+    # ... and the rest of what the emulator's print shows
+    assert dlg.mark_missing_btn.isEnabled()
+    qtbot.mouseClick(dlg.mark_missing_btn, Qt.LeftButton)
+    assert listed(dlg) == ["M1:57", "K2:3"] and not dlg.mark_missing_btn.isEnabled()
+    assert dead_in(user) == set()                                  # nothing written before Save
+    with qtbot.waitSignal(dlg.profileSaved, timeout=5_000):
+        qtbot.mouseClick(dlg.save_btn, Qt.LeftButton)
+    assert dead_in(user) == {("M1", 57), ("K2", 3)}
+    text = user.read_text()
+    assert 'dead_nozzles = [{ head = "M1", nozzle = 57 }, { head = "K2", nozzle = 3 }]' in text
+    assert "# Nozzles listed here never fire" in text              # the file's comments stay
+    assert dead_in(DEFAULT_PROFILE) == set()
+    assert not dlg.save_btn.isEnabled() and "M1:57, K2:3" in dlg.dead_now.text()
+    # the nozzle check still prints (every nozzle fires in a test print) and still shows them
+    dlg.media = None
+    qtbot.mouseClick(dlg.print_btn, Qt.LeftButton)
+    qtbot.waitUntil(lambda: dlg.media is not None or "failed" in dlg.status.text(), timeout=LONG)
+    assert dlg.media is not None, dlg.status.text()
+    assert "M1:57" in dlg.nozzle_result.text() and "printed:" not in dlg.nozzle_result.text()
+    dlg.close()
+
+    # with the saved profile: a 1-pass job is refused with the planner's reason on its row,
+    # the queue goes on, and a 2-pass job prints exactly on the machine with dead nozzles
+    win.table.clearSelection()
+    choose(win.settings_panel.passes, 1)
+    (one,) = win.add_files([str(src)])
+    win.table.clearSelection()
+    choose(win.settings_panel.passes, 2)
+    (two,) = win.add_files([str(src)])
+    qtbot.waitUntil(lambda: one.state == Q.ERROR and two.state == Q.READY, timeout=30_000)
+    assert "M1:57" in cell(win, one, Q.QueueModel.COL_MESSAGE)
+    assert "use more passes" in cell(win, one, Q.QueueModel.COL_MESSAGE)
+    with qtbot.waitSignal(win.queueFinished, timeout=LONG):
+        win.print_queue()
+    assert one.state == Q.FAILED and "use more passes" in one.message
+    assert "Traceback" not in win.logview.toPlainText()            # refused, not crashed
+    assert cell(win, one, Q.QueueModel.COL_STATE) == "Failed"
+    assert two.state == Q.DONE, two.message
+    assert two.reports[0]["passes_total"] == two.estimate.passes
+    assert np.array_equal(read_planes(two.media[0]), rip_planes(tmp_path, two, win))
+    win.select_item(one.id)
+    qtbot.waitUntil(lambda: "2 or more passes" in win.preview.overlay.text(), timeout=5_000)
+
+    # a replaced head: clear its nozzles; then the rest
+    dlg = win.open_calibration()
+    assert dlg.kind == "nozzle-check" and listed(dlg) == ["M1:57", "K2:3"]
+    choose(dlg.dead_head, "C1")
+    assert not dlg.clear_head_btn.isEnabled()                      # nothing marked on C1
+    choose(dlg.dead_head, "K2")
+    assert dlg.clear_head_btn.isEnabled() and dlg.clear_head_btn.text() == "Clear K2"
+    qtbot.mouseClick(dlg.clear_head_btn, Qt.LeftButton)
+    assert listed(dlg) == ["M1:57"] and "clear K2:3" in dlg.dead_now.text()
+    qtbot.mouseClick(dlg.save_btn, Qt.LeftButton)
+    assert dead_in(user) == {("M1", 57)}
+    dlg.dead_nozzle.setValue(100)
+    qtbot.mouseClick(dlg.mark_btn, Qt.LeftButton)                  # K2:100 marked, then Delete
+    assert listed(dlg) == ["M1:57", "K2:100"]
+    dlg.dead_list.item(1).setSelected(True)
+    qtbot.keyClick(dlg.dead_list, Qt.Key_Delete)
+    assert listed(dlg) == ["M1:57"] and not dlg.save_btn.isEnabled()
+    dlg.dead_list.item(0).setSelected(True)
+    qtbot.mouseClick(dlg.remove_dead_btn, Qt.LeftButton)
+    assert listed(dlg) == [] and dlg.save_btn.isEnabled()
+    qtbot.mouseClick(dlg.save_btn, Qt.LeftButton)
+    assert dead_in(user) == set() and "dead_nozzles = []" in user.read_text()
+    dlg.dead_nozzle.setValue(57)                                   # K2:57 marked, then Clear all
+    qtbot.mouseClick(dlg.mark_btn, Qt.LeftButton)
+    assert listed(dlg) == ["K2:57"]
+    qtbot.mouseClick(dlg.clear_all_btn, Qt.LeftButton)
+    assert listed(dlg) == [] and not dlg.save_btn.isEnabled()
+    dlg.close()

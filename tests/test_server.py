@@ -1,7 +1,9 @@
 """The print server (issue 7, docs/server.md): nothing submitted is ever lost — a server
 killed mid-job resumes it bit-exact; 1,000 concurrent submissions are all accepted once,
 in order per client; hostile inputs are refused with their reason; hot folders take only
-complete files; the accounting matches the planes."""
+complete files; the accounting matches the planes; a failed or cancelled job requeued
+prints again bit-exact with both attempts accounted; edited presets are taken without a
+restart and a broken presets file changes nothing."""
 
 import csv
 import http.client
@@ -538,8 +540,288 @@ def test_cancel_a_printing_job_stops_it_and_the_queue_goes_on(srv, client, tmp_p
     rows = client.report(job["id"])
     assert len(rows) == 1 and rows[0]["outcome"] == "cancelled"
     assert 0 < rows[0]["passes_printed"] < rows[0]["passes_total"]
-    assert not list((srv.state_dir / "spool").glob("*")) or \
-        all(p.name != j.get("spool_path") for p in (srv.state_dir / "spool").iterdir())
+    # the cancelled job keeps its spooled copy (it may be requeued); the done one does not
+    assert os.path.isfile(db_job(srv.state_dir, job["id"])["spool_path"])
+    assert db_job(srv.state_dir, nxt["id"])["spool_path"] is None
+
+
+# -- requeue -------------------------------------------------------------------------------------
+def cli(srv_or_state, *args, timeout=60):
+    state = getattr(srv_or_state, "state_dir", srv_or_state)
+    return subprocess.run([PY, "-m", "wideprint.app.server_cli", *args, "--state-dir", str(state)],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_requeue_a_cancelled_job_prints_it_again_bit_exact(srv, client, tmp_path):
+    planes = random_planes(400, 300, seed=23)
+    src = write_cmyk_tiff(tmp_path / "again.tif", planes)
+    job = client.submit(src, settings={"passes": 4}, priority=3)["job"]
+    jid = job["id"]
+    os.unlink(src)                                   # only the spool's copy is left
+    wait_for(lambda: client.job(jid)["passes_done"] >= 1, 30, poll=0.005, what="the first pass")
+    with pytest.raises(ApiError) as e:               # not while it prints
+        client.action(jid, "requeue")
+    assert e.value.status == 409 and f"job {jid} is printing" in str(e.value)
+    assert client.action(jid, "cancel")["state"] == "cancelled"
+    first = client.job(jid)
+    assert 0 < first["passes_done"] < first["passes_total"]
+
+    r = cli(srv, "requeue", str(jid))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == f"job {jid}: queued"
+    done = client.wait(jid, 60)
+    assert done["state"] == "done" and done["message"] == "", done
+    assert (done["attempt"], done["copies_done"], done["priority"]) == (2, 1, 3)
+    assert done["settings"] == {"passes": 4}
+    assert done["passes_done"] == done["passes_total"]
+    # a fresh print from the first pass, on a fresh placement: the media is the image
+    assert np.array_equal(read_planes(srv.root / "media" / f"job-{jid}.tif"), planes)
+    # both attempts are in the accounting
+    rows = client.report(jid)
+    assert [(r["attempt"], r["outcome"]) for r in rows] == [(1, "cancelled"), (2, "done")]
+    assert 0 < rows[0]["passes_printed"] < rows[0]["passes_total"]
+    assert rows[1]["passes_printed"] == rows[1]["passes_total"] and rows[1]["resumed"] == 0
+    assert [rows[1][f"drops_{c}"] for c in "cmyk"] == planes.reshape(-1, 4).sum(0).tolist()
+    text = client.report_csv(jid)
+    assert [(r["attempt"], r["outcome"]) for r in csv.DictReader(io.StringIO(text))] == \
+        [("1", "cancelled"), ("2", "done")]
+    assert db_job(srv.state_dir, jid)["spool_path"] is None         # done: the copy went
+    with pytest.raises(ApiError) as e:
+        client.action(jid, "requeue")
+    assert e.value.status == 409 and f"job {jid} is done" in str(e.value)
+
+
+def test_requeue_a_job_failed_by_a_printer_fault(srv, client, tmp_path):
+    """The paper runs out mid-job: the job fails and the queue pauses; the operator loads
+    paper, clears the fault, requeues the job and resumes: it prints whole."""
+    planes = random_planes(300, 200, seed=29)
+    src = write_cmyk_tiff(tmp_path / "roll.tif", planes)
+    job = client.submit(src, settings={"passes": 4})["job"]
+    jid = job["id"]
+    wait_for(lambda: client.job(jid)["passes_done"] >= 1, 30, poll=0.005, what="the first pass")
+    emu = srv.worker.dev.emulator
+    emu.paper_left_steps = 1                         # the roll ends at the next feed
+    failed = client.wait(jid, 60)
+    try:
+        assert failed["state"] == "failed" and "paper out" in failed["message"], failed
+        assert client.status()["queue"]["paused"] is True
+        emu.paper_left_steps = None                  # a new roll...
+        emu.clear_fault()                            # ...and the fault cleared on the panel
+        job = client.action(jid, "requeue")
+        assert (job["state"], job["attempt"], job["message"], job["passes_done"]) == \
+            ("queued", 2, "", 0)
+        time.sleep(0.3)
+        assert client.job(jid)["state"] == "queued"  # the queue stays paused until resumed
+    finally:
+        emu.paper_left_steps = None
+        emu.clear_fault()
+        client.pause_queue(False)
+    done = client.wait(jid, 60)
+    assert done["state"] == "done", done
+    assert np.array_equal(read_planes(srv.root / "media" / f"job-{jid}.tif"), planes)
+    assert [(r["attempt"], r["outcome"]) for r in client.report(jid)] == \
+        [(1, "failed"), (2, "done")]
+
+
+def test_requeue_is_refused_with_the_reason(srv, client):
+    client.pause_queue(True)
+    try:
+        q = client.submit_bytes(tiny_tiff(), name="waits.tif")["job"]
+        h = client.submit_bytes(tiny_tiff(), name="held.tif", hold=True)["job"]
+        for job, state in ((q, "queued"), (h, "held")):
+            with pytest.raises(ApiError) as e:
+                client.action(job["id"], "requeue")
+            assert e.value.status == 409
+            assert f"job {job['id']} is {state}: only a failed or cancelled job" in str(e.value)
+        status, body = raw_request(srv, "POST", "/v1/jobs/999999/requeue")
+        assert status == 404 and "no job 999999" in body["error"]
+        # a cancelled job whose spooled copy was deleted behind the server's back
+        client.action(q["id"], "cancel")
+        os.unlink(db_job(srv.state_dir, q["id"])["spool_path"])
+        r = cli(srv, "requeue", str(q["id"]), str(h["id"]))
+        assert r.returncode == 1
+        assert f"job {q['id']}: its spooled file is gone" in r.stderr, r.stderr
+        assert f"job {h['id']} is held" in r.stderr, r.stderr
+        assert client.job(q["id"])["state"] == "cancelled"
+    finally:
+        client.action(h["id"], "cancel")
+        client.pause_queue(False)
+
+
+def test_spool_copies_of_ended_jobs_expire(tmp_path):
+    from wideprint.driver.server import PrintServer, ServerConfig
+    state = tmp_path / "state"
+
+    def server(**kw):
+        s = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
+                                     start_paused=True, **kw))
+        s.start()
+        return s, Client(state)
+    s, c = server(keep_failed_s=3600)
+    try:
+        old = c.submit_bytes(tiny_tiff(), name="old.tif")["job"]
+        new = c.submit_bytes(tiny_tiff(), name="new.tif")["job"]
+        c.action(old["id"], "cancel")
+        c.action(new["id"], "cancel")
+        kept = db_job(state, old["id"])["spool_path"]
+        assert os.path.isfile(kept)
+    finally:
+        c.close()
+        s.stop(timeout=5)
+    db = sqlite3.connect(state / "wideprint.db")       # cancelled two hours ago
+    db.execute("UPDATE jobs SET finished=finished-7200 WHERE id=?", (old["id"],))
+    db.commit()
+    db.close()
+    s, c = server(keep_failed_s=3600)                  # the new server expires it
+    try:
+        assert not os.path.exists(kept)
+        with pytest.raises(ApiError) as e:
+            c.action(old["id"], "requeue")
+        assert e.value.status == 410 and f"job {old['id']}: its spooled file is gone" in str(e.value)
+        assert c.action(new["id"], "requeue")["state"] == "queued"   # still within the hour
+        c.action(new["id"], "cancel")
+    finally:
+        c.close()
+        s.stop(timeout=5)
+    s, c = server(keep_failed_s=0)                     # 0: deleted at once, as before
+    try:
+        j = c.submit_bytes(tiny_tiff(), name="x.tif")["job"]
+        c.action(j["id"], "cancel")
+        assert db_job(state, j["id"])["spool_path"] is None
+        assert list((state / "spool").iterdir()) == []
+        with pytest.raises(ApiError) as e:
+            c.action(j["id"], "requeue")
+        assert e.value.status == 410
+    finally:
+        c.close()
+        s.stop(timeout=5)
+
+
+def test_schema_1_database_gets_the_attempt_columns(tmp_path):
+    from wideprint.driver.spool import SCHEMA, Spool
+    state = tmp_path / "state"
+    state.mkdir()
+    import re
+    old = re.sub(r"\n\s*attempt[^\n]*", "", SCHEMA)               # schema 1: no attempt columns
+    old = re.sub(r",(\s*(--[^\n]*)?\n\);)", r"\1", old)
+    assert "attempt" not in old
+    db = sqlite3.connect(state / "wideprint.db")
+    db.executescript(old + "INSERT INTO meta VALUES ('schema', '1');"
+                     "INSERT INTO jobs (name, source, size, sha256, settings, state, submitted) "
+                     "VALUES ('a.tif', 'api', 1, 'x', '{}', 'failed', 0);")
+    db.close()
+    sp = Spool(state)
+    assert sp.get(1)["attempt"] == 1
+    assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "2"
+    sp.close()
+
+
+# -- presets re-read without a restart --------------------------------------------------------------
+def write_atomic(path, text):
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def test_presets_reread_when_the_file_changes_and_a_broken_file_is_refused(tmp_path):
+    from wideprint.driver.server import DEFAULT_PRESETS, PrintServer, ServerConfig
+    state, hot = tmp_path / "state", tmp_path / "hot"
+    server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
+                                      hot_folder_root=hot, scan_interval=0.1, start_paused=True,
+                                      media_dir=tmp_path / "media"))
+    server.start()
+    c = Client(state)
+    try:
+        assert c.presets()["presets"] == DEFAULT_PRESETS
+        banner = c.submit_bytes(tiny_tiff(), name="b.tif", preset="banner")["job"]
+        # edited while running: presets.toml (it takes precedence over presets.json)
+        write_atomic(state / "presets.toml", '[default]\n[photo]\npasses = 2\n'
+                     '[poster]\npasses = 3\nbidir = true\n')
+        # picked up by the hot-folder scanner without any request: the new preset's folder
+        wait_for(lambda: (hot / "poster" / "done").is_dir(), 5, what="the poster hot folder")
+        got = c.presets()
+        assert got["presets"] == {"default": {}, "photo": {"passes": 2},
+                                  "poster": {"passes": 3, "bidir": True}}
+        assert got["file"] == str(state / "presets.toml") and got["error"] is None
+        (hot / "poster" / "p.tif").write_bytes(tiny_tiff())
+        hot_job = wait_for(lambda: [j for j in c.jobs() if j["name"] == "p.tif"], 10,
+                           what="the hot-folder job")[0]
+        assert (hot_job["preset"], hot_job["settings"]) == ("poster", {"passes": 3, "bidir": True})
+        # a removed preset: new jobs may not name it, queued ones keep their settings
+        with pytest.raises(ApiError) as e:
+            c.submit_bytes(tiny_tiff(), name="b2.tif", preset="banner")
+        assert e.value.status == 400 and "unknown preset 'banner'" in str(e.value)
+        assert c.job(banner["id"])["settings"] == DEFAULT_PRESETS["banner"]
+        (hot / "banner" / "late.tif").write_bytes(tiny_tiff())
+        time.sleep(0.5)                                   # five scans: no longer watched
+        assert (hot / "banner" / "late.tif").exists()
+        assert not [j for j in c.jobs() if j["name"] == "late.tif"]
+
+        # broken files: the API names the file and the problem, the presets in use stay
+        for text, why in (("[photo]\npasses = 5\n", "preset 'photo': passes must be one of"),
+                          ("[photo\npasses = 2\n", "line 1"),
+                          ("[done]\n", "preset 'done': reserved")):
+            write_atomic(state / "presets.toml", text)
+            if why.startswith("preset 'photo'"):          # noticed without being asked
+                err = wait_for(lambda: c.presets()["error"], 5, what="the broken file noticed")
+                assert str(state / "presets.toml") in err and why in err, err
+            status, body = raw_request(server, "POST", "/v1/presets/reload")
+            assert status == 400, body
+            assert str(state / "presets.toml") in body["error"] and why in body["error"], body
+            assert "the presets in use are kept" in body["error"]
+            assert sorted(c.presets()["presets"]) == ["default", "photo", "poster"]
+        r = cli(state, "presets", "--reload")
+        assert r.returncode == 1 and "presets.toml: preset 'done'" in r.stderr, r.stderr
+        st = c.status()
+        assert "preset 'done'" in st["presets"]["error"]
+        r = cli(state, "status")
+        assert r.returncode == 0 and "NOT RE-READ" in r.stdout, r.stdout + r.stderr
+        # the server goes on: jobs with the presets in use are accepted and printed
+        c.pause_queue(False)
+        ok = c.submit_bytes(tiny_tiff(), name="ok.tif", preset="poster")["job"]
+        for jid in (ok["id"], banner["id"], hot_job["id"]):
+            assert c.wait(jid, 60)["state"] == "done"
+        assert client_job_settings(c, banner["id"]) == DEFAULT_PRESETS["banner"]
+        # fixed: re-read (by the scanner or this request, whichever comes first), error cleared
+        write_atomic(state / "presets.toml", '[default]\n[photo]\npasses = 4\n')
+        r = cli(state, "presets", "--reload")
+        assert r.returncode == 0 and r.stderr == "", r.stderr
+        assert r.stdout.splitlines()[1:] == ["default      (the RIP's defaults)",
+                                             "photo        passes=4"], r.stdout
+        got = c.presets()
+        assert got["presets"] == {"default": {}, "photo": {"passes": 4}} and got["error"] is None
+        assert c.status()["presets"]["error"] is None
+    finally:
+        c.close()
+        server.stop(timeout=5)
+
+
+def client_job_settings(c, job_id):
+    return c.job(job_id)["settings"]
+
+
+def test_presets_reload_says_what_changed(tmp_path):
+    from wideprint.driver.server import PrintServer, ServerConfig
+    state = tmp_path / "state"
+    server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
+                                      start_paused=True))      # no hot folders: no scanner
+    server.start()
+    try:
+        presets = json.loads((state / "presets.json").read_text())
+        presets["photo"]["passes"] = 6
+        presets["poster"] = {"dither": "bayer"}
+        del presets["banner"]
+        write_atomic(state / "presets.json", json.dumps(presets))
+        r = cli(state, "presets", "--reload", "--json")
+        assert r.returncode == 0, r.stderr
+        assert r.stderr.strip() == (f"re-read {state / 'presets.json'}: added poster; "
+                                    f"removed banner; changed photo")
+        assert json.loads(r.stdout) == presets
+        r = cli(state, "presets", "--reload")
+        assert r.returncode == 0 and "no change (the presets in use date from" in r.stdout.splitlines()[0], r.stdout
+    finally:
+        server.stop(timeout=5)
 
 
 def test_progress_bar():

@@ -1,7 +1,10 @@
 """Test prints and calibration (docs/testprints.md): nozzle check, bidirectional and head
 alignment.  The operator prints a pattern, picks the straight block (on the emulator the
 dialog shows the printed media and suggests it), and the chosen offsets are written to
-the user's copy of the printer profile with rip.profile.save_calibration."""
+the user's copy of the printer profile with rip.profile.save_calibration.  After a nozzle
+check the operator marks the nozzles whose dash is missing as dead (or clears them after a
+head is replaced); they go into the profile's dead_nozzles, which the pass planner prints
+around (with two or more passes)."""
 
 from __future__ import annotations
 
@@ -9,11 +12,13 @@ import logging
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QRectF, Qt, Signal
+from PySide6.QtCore import QEvent, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QFont, QPainter, QPen
-from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QDoubleSpinBox, QFormLayout,
-                               QGridLayout, QGroupBox, QHBoxLayout, QLabel, QMessageBox,
-                               QPushButton, QSpinBox, QStackedWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDialog, QDialogButtonBox,
+                               QDoubleSpinBox, QFormLayout, QGridLayout, QGroupBox, QHBoxLayout,
+                               QLabel, QListView, QListWidget, QListWidgetItem, QMessageBox,
+                               QPushButton, QSizePolicy, QSpinBox, QStackedWidget, QVBoxLayout,
+                               QWidget)
 
 from ...rip.planes import read_planes, render_rgb
 from ...rip.profile import Profile, load_profile, save_calibration
@@ -81,6 +86,16 @@ def suggest_heads(media: np.ndarray, profile: Profile) -> dict[str, int | None]:
                                     ref[b * ALIGN_BLOCK:(b + 1) * ALIGN_BLOCK])]
         out[name] = found[0] if len(found) == 1 else None
     return out
+
+
+def dead_names(profile: Profile) -> set[tuple[str, int]]:
+    """The profile's dead nozzles as (head name, nozzle)."""
+    return {(profile.heads[h].name, z) for h, z in profile.dead_nozzles}
+
+
+def fmt_nozzles(nozzles, profile: Profile) -> str:
+    order = {h.name: h.index for h in profile.heads}
+    return ", ".join(f"{h}:{z}" for h, z in sorted(nozzles, key=lambda hz: (order.get(hz[0], 99), hz[1])))
 
 
 def missing_nozzles(media: np.ndarray, profile: Profile) -> list[str]:
@@ -289,9 +304,7 @@ class CalibrationDialog(QDialog):
             hg.addWidget(cb, i // 4, (i % 4) * 2 + 1)
             self.head_choice[h.name] = cb
         self.choice.addWidget(hd)                                          # 2
-        self.nozzle_result = QLabel("")
-        self.nozzle_result.setWordWrap(True)
-        self.choice.addWidget(self.nozzle_result)                          # 3
+        self.choice.addWidget(self._dead_nozzle_box())                     # 3
 
         buttons = QDialogButtonBox()
         self.save_btn = buttons.addButton("Save to printer profile", QDialogButtonBox.ApplyRole)
@@ -315,6 +328,142 @@ class CalibrationDialog(QDialog):
         self._pattern_changed()
         self.resize(860, 640)
 
+    def _dead_nozzle_box(self) -> QGroupBox:
+        """nozzle-check: mark dead nozzles (per head, 1..126) and clear them; what the
+        list says is written to the profile's dead_nozzles by Save."""
+        box = QGroupBox("Dead nozzles (the print is planned around them; needs 2 or more passes)")
+        box.setObjectName("dead_nozzle_box")
+        v = QVBoxLayout(box)
+        r1 = QHBoxLayout()
+        self.nozzle_result = QLabel("Print the nozzle check: a missing dash is a dead nozzle. The dashes "
+                                    "run from nozzle 1 at the top to 126 at the bottom (the two heads of "
+                                    "a colour alternate), in 8 staggered columns. Every nozzle fires in "
+                                    "the test print, also those marked dead.")
+        self.nozzle_result.setWordWrap(True)
+        r1.addWidget(self.nozzle_result, 1)
+        self.mark_missing_btn = QPushButton("Mark missing as dead")
+        self.mark_missing_btn.setObjectName("dead_mark_missing")
+        self.mark_missing_btn.setToolTip("Add every nozzle whose dash did not print to the list")
+        self.mark_missing_btn.clicked.connect(self._mark_missing)
+        self.mark_missing_btn.setEnabled(False)
+        r1.addWidget(self.mark_missing_btn, 0, Qt.AlignTop)
+        v.addLayout(r1)
+        r2 = QHBoxLayout()
+        r2.addWidget(QLabel("Head"))
+        self.dead_head = QComboBox()
+        self.dead_head.setObjectName("dead_head")
+        for h in self.profile.heads:
+            self.dead_head.addItem(h.name, h.name)
+        self.dead_head.currentIndexChanged.connect(self._update_dead_buttons)
+        r2.addWidget(self.dead_head)
+        r2.addWidget(QLabel("nozzle"))
+        self.dead_nozzle = QSpinBox()
+        self.dead_nozzle.setObjectName("dead_nozzle")
+        self.dead_nozzle.setRange(1, self.profile.nozzles - 2)
+        self.dead_nozzle.setToolTip(f"1..{self.profile.nozzles - 2} (nozzles 0 and "
+                                    f"{self.profile.nozzles - 1} never fire)")
+        r2.addWidget(self.dead_nozzle)
+        self.mark_btn = QPushButton("Mark dead")
+        self.mark_btn.setObjectName("dead_mark")
+        self.mark_btn.clicked.connect(self._mark_one)
+        r2.addWidget(self.mark_btn)
+        r2.addStretch(1)
+        self.remove_dead_btn = QPushButton("Remove")
+        self.remove_dead_btn.setObjectName("dead_remove")
+        self.remove_dead_btn.setToolTip("Take the selected nozzles off the list (they print again)")
+        self.remove_dead_btn.clicked.connect(self._remove_selected_dead)
+        r2.addWidget(self.remove_dead_btn)
+        self.clear_head_btn = QPushButton("Clear head")
+        self.clear_head_btn.setObjectName("dead_clear_head")
+        self.clear_head_btn.setToolTip("Take every nozzle of the head chosen on the left off the list "
+                                       "(a replaced head)")
+        self.clear_head_btn.clicked.connect(self._clear_head)
+        r2.addWidget(self.clear_head_btn)
+        self.clear_all_btn = QPushButton("Clear all")
+        self.clear_all_btn.setObjectName("dead_clear_all")
+        self.clear_all_btn.clicked.connect(self._clear_all_dead)
+        r2.addWidget(self.clear_all_btn)
+        v.addLayout(r2)
+        self.dead_list = QListWidget()
+        self.dead_list.setObjectName("dead_list")
+        self.dead_list.setFlow(QListView.LeftToRight)
+        self.dead_list.setWrapping(True)
+        self.dead_list.setSpacing(2)
+        self.dead_list.setSelectionMode(QAbstractItemView.ExtendedSelection)
+        self.dead_list.setFixedHeight(self.dead_list.fontMetrics().height() * 2 + 22)
+        self.dead_list.setToolTip("Nozzles marked dead; select and Remove (or Delete) to take them off")
+        self.dead_list.itemSelectionChanged.connect(self._update_dead_buttons)
+        self.dead_list.installEventFilter(self)                  # Delete takes nozzles off
+        v.addWidget(self.dead_list)
+        self.dead_now = QLabel("")
+        self.dead_now.setObjectName("dead_now")
+        self.dead_now.setWordWrap(True)
+        v.addWidget(self.dead_now)
+        self.dead_pending: set[tuple[str, int]] = dead_names(self.profile)
+        self.missing: list[tuple[str, int]] = []
+        return box
+
+    # -- dead nozzles ----------------------------------------------------------------------
+    def _mark_one(self) -> None:
+        self._set_dead(self.dead_pending | {(self.dead_head.currentData(), self.dead_nozzle.value())})
+
+    def _mark_missing(self) -> None:
+        self._set_dead(self.dead_pending | set(self.missing))
+
+    def _remove_selected_dead(self) -> None:
+        gone = {it.data(Qt.UserRole) for it in self.dead_list.selectedItems()}
+        self._set_dead(self.dead_pending - gone)
+
+    def _clear_head(self) -> None:
+        head = self.dead_head.currentData()
+        self._set_dead({hz for hz in self.dead_pending if hz[0] != head})
+
+    def _clear_all_dead(self) -> None:
+        self._set_dead(set())
+
+    def _set_dead(self, nozzles) -> None:
+        self.dead_pending = {(str(h), int(z)) for h, z in nozzles}
+        self._show_dead()
+
+    def _show_dead(self) -> None:
+        now = dead_names(self.profile)
+        self.dead_list.clear()
+        order = {h.name: h.index for h in self.profile.heads}
+        for h, z in sorted(self.dead_pending, key=lambda hz: (order.get(hz[0], 99), hz[1])):
+            it = QListWidgetItem(f"{h}:{z}")
+            it.setData(Qt.UserRole, (h, z))
+            if (h, z) not in now:
+                it.setForeground(QColor("#1565c0"))
+                it.setToolTip("Not saved yet")
+            self.dead_list.addItem(it)
+        if self.dead_pending == now:
+            self.dead_now.setText("Profile: " + (fmt_nozzles(now, self.profile) or "no dead nozzles"))
+        else:
+            added, removed = self.dead_pending - now, now - self.dead_pending
+            parts = ([f"mark {fmt_nozzles(added, self.profile)} dead"] if added else []) + \
+                ([f"clear {fmt_nozzles(removed, self.profile)}"] if removed else [])
+            self.dead_now.setText(
+                f"Profile: {fmt_nozzles(now, self.profile) or 'no dead nozzles'} → after saving: "
+                f"{fmt_nozzles(self.dead_pending, self.profile) or 'none'} ({'; '.join(parts)})")
+        self._update_dead_buttons()
+        if self.kind == "nozzle-check":
+            self.save_btn.setEnabled(self.dead_pending != now)
+
+    def _update_dead_buttons(self) -> None:
+        self.mark_missing_btn.setEnabled(bool(set(self.missing) - self.dead_pending))
+        self.remove_dead_btn.setEnabled(bool(self.dead_list.selectedItems()))
+        self.clear_all_btn.setEnabled(bool(self.dead_pending))
+        head = self.dead_head.currentData()
+        self.clear_head_btn.setText(f"Clear {head}")
+        self.clear_head_btn.setEnabled(any(h == head for h, _ in self.dead_pending))
+
+    def eventFilter(self, obj, ev) -> bool:
+        if obj is self.dead_list and ev.type() == QEvent.KeyPress and \
+                ev.key() in (Qt.Key_Delete, Qt.Key_Backspace):
+            self._remove_selected_dead()
+            return True
+        return super().eventFilter(obj, ev)
+
     # -- state -------------------------------------------------------------------------
     @property
     def kind(self) -> str:
@@ -329,11 +478,18 @@ class CalibrationDialog(QDialog):
         self.head.setEnabled(k in ("line", "sawtooth"))
         self.nozzle.setEnabled(k == "line")
         self.choice.setCurrentIndex({"bidir-align": 1, "head-align": 2, "nozzle-check": 3}.get(k, 0))
+        for i in range(self.choice.count()):     # as tall as the page shown, not the tallest
+            self.choice.widget(i).setSizePolicy(
+                QSizePolicy.Preferred, QSizePolicy.Preferred if i == self.choice.currentIndex() else QSizePolicy.Ignored)
+        self.choice.updateGeometry()
         self.media = None
         self.job = None
+        self.missing = []
         self.save_btn.setEnabled(False)
         self._show_intended()
         self._update_profile_text()
+        if k == "nozzle-check":
+            self._show_dead()
 
     def _pattern_job(self) -> PatternJob:
         k, dpi = self.kind, self.dpi.currentData()
@@ -402,7 +558,9 @@ class CalibrationDialog(QDialog):
             self.status.setText(f"<span style='color:#c62828'>{state}: {result.get('message', '')}</span>")
             return
         self.status.setText("Printed. Pick the straight block (click it) and save." if self.kind in
-                            ("bidir-align", "head-align") else "Printed.")
+                            ("bidir-align", "head-align") else
+                            "Printed. Mark the nozzles whose dash is missing as dead, then save."
+                            if self.kind == "nozzle-check" else "Printed.")
         if self.media_file and Path(self.media_file).exists():
             self.media = read_planes(self.media_file)
             c, r = self._col_row_mm()
@@ -412,6 +570,8 @@ class CalibrationDialog(QDialog):
         else:
             self.status.setText(self.status.text() + " Compare the print with the picture.")
         self.save_btn.setEnabled(self.kind in ("bidir-align", "head-align"))
+        if self.kind == "nozzle-check":
+            self._show_dead()
 
     def _suggest(self) -> None:
         m = self.media
@@ -433,8 +593,14 @@ class CalibrationDialog(QDialog):
                 f"{n} {o:+d}" for n, o in off.items()) if off else " All heads look aligned."))
         elif self.kind == "nozzle-check":
             miss = missing_nozzles(m, self.profile)
-            self.nozzle_result.setText("Every nozzle printed its dash." if not miss else
-                                       f"Missing dashes (dead nozzles): {', '.join(miss)}")
+            self.missing = [(h, int(z)) for h, z in (x.split(":") for x in miss)]
+            revived = dead_names(self.profile) - set(self.missing)
+            self.nozzle_result.setText(
+                ("Every nozzle printed its dash." if not miss else
+                 f"Missing dashes (dead nozzles): {', '.join(miss)}") +
+                (f" Marked dead but printed: {fmt_nozzles(revived, self.profile)} (remove them if the "
+                 f"head was cleaned or replaced)." if revived else ""))
+            self._show_dead()
         self._choice_changed()
 
     # -- choosing and saving -------------------------------------------------------------
@@ -477,10 +643,16 @@ class CalibrationDialog(QDialog):
                 if step:
                     out[h.name] = h.x_counts - step
             return dict(head_x_counts=out)
+        if self.kind == "nozzle-check":
+            order = {h.name: h.index for h in self.profile.heads}
+            return dict(dead_nozzles=sorted(self.dead_pending, key=lambda hz: (order[hz[0]], hz[1])))
         return {}
 
     def save(self) -> None:
         values = self.calibration_values()
+        if "dead_nozzles" in values and set(values["dead_nozzles"]) == dead_names(self.profile):
+            self.status.setText("Nothing to change: the list is the profile's.")
+            return
         if not values or values == {"head_x_counts": {}}:
             self.status.setText("Nothing to change: every offset is 0.")
             return
@@ -489,7 +661,10 @@ class CalibrationDialog(QDialog):
         except (ValueError, OSError) as exc:
             QMessageBox.warning(self, "Calibration", f"Cannot save the calibration: {exc}")
             return
-        what = ", ".join(f"{k} = {v}" for k, v in values.items())
+        if "dead_nozzles" in values:
+            what = "dead nozzles " + (fmt_nozzles(values["dead_nozzles"], self.profile) or "cleared")
+        else:
+            what = ", ".join(f"{k} = {v}" for k, v in values.items())
         log.info("calibration saved to %s: %s", self.profile_path, what)
         self.status.setText(f"Saved to the printer profile: {what}")
         self.save_btn.setEnabled(False)
@@ -497,4 +672,7 @@ class CalibrationDialog(QDialog):
             cb.setCurrentIndex(align_offsets().index(0))
         self.bidir_choice.setCurrentIndex(align_offsets().index(0))
         self._update_profile_text()
+        if "dead_nozzles" in values:
+            self.dead_pending = dead_names(self.profile)
+            self._show_dead()
         self.profileSaved.emit(self.profile_path)

@@ -9,9 +9,9 @@ from pathlib import Path
 
 from PySide6.QtCore import QByteArray, QItemSelectionModel, QThread, QThreadPool, QTimer, Qt, Signal
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import (QAbstractItemView, QDockWidget, QFileDialog,
+from PySide6.QtWidgets import (QDockWidget, QFileDialog,
                                QHBoxLayout, QLabel, QMainWindow, QMenu, QMessageBox,
-                               QScrollArea, QSizePolicy, QSplitter, QStyle, QTableView, QTabWidget, QToolButton,
+                               QScrollArea, QSizePolicy, QSplitter, QStyle, QTabWidget, QToolButton,
                                QVBoxLayout, QWidget)
 
 from ... import __version__
@@ -183,11 +183,10 @@ class MainWindow(QMainWindow):
 
         # queue
         self.model = Q.QueueModel(self)
-        self.table = QTableView()
+        self.model.rowsMoved.connect(lambda *_: self._update_actions())
+        self.table = Q.QueueView()          # rows can be dragged to a new place
         self.table.setObjectName("queue")
         self.table.setModel(self.model)
-        self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
-        self.table.setSelectionMode(QAbstractItemView.ExtendedSelection)
         self.table.setItemDelegateForColumn(Q.QueueModel.COL_PROGRESS, Q.ProgressDelegate(self.table))
         self.table.verticalHeader().setVisible(False)
         self.table.verticalHeader().setDefaultSectionSize(24)
@@ -819,8 +818,10 @@ class MainWindow(QMainWindow):
         A["clear_fault"].setEnabled(self.connected and not busy)
         A["remove"].setEnabled(any(it.state not in Q.ACTIVE for it in sel))
         A["duplicate"].setEnabled(bool(sel))
-        A["up"].setEnabled(len(sel) == 1 and self.model.row_of(sel[0].id) > 0)
-        A["down"].setEnabled(len(sel) == 1 and 0 <= self.model.row_of(sel[0].id) < len(self.model.items) - 1)
+        # a job being printed keeps its place (the same rule as dragging, Q.movable)
+        one = len(sel) == 1 and Q.movable(sel[0])
+        A["up"].setEnabled(one and self.model.row_of(sel[0].id) > 0)
+        A["down"].setEnabled(one and 0 <= self.model.row_of(sel[0].id) < len(self.model.items) - 1)
         A["reset"].setEnabled(any(it.state in (Q.DONE, Q.FAILED, Q.CANCELLED, Q.ERROR) for it in sel))
         A["calibrate"].setEnabled(not busy)
         self._update_summary()

@@ -6,6 +6,10 @@ import re
 
 # (pattern in the driver's / loader's message, what it means and what to do)
 _RULES = [
+    (r"dead nozzles .* unprintable with", "Nozzles marked dead in the printer profile leave rows that "
+     "no other nozzle can print in this many passes. Choose 2 or more passes (the other passes print "
+     "those rows), or, if the head was cleaned or replaced, clear the dead nozzles in Test prints & "
+     "calibration (nozzle check)."),
     (r"FIFO underrun", "Print data reached the heads too late, so the pass stopped. The computer "
      "or the data link could not keep up: close other programs, check the data cable, then print "
      "the job again."),

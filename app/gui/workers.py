@@ -472,6 +472,11 @@ class PrinterWorker(QObject):
                 rip = self._rip_job(t, profile)
             except (ImageError, ValueError, OSError) as exc:
                 return dict(state="failed", message=str(exc), reports=reports, media=media)
+            try:
+                total_passes = rip.planner().total_passes
+            except ValueError as exc:       # e.g. dead nozzles with 1 pass: refused, with why
+                rip.close()
+                return dict(state="failed", message=str(exc), reports=reports, media=media)
             self._job_ids += 1
             job_id = self._job_ids
             mpath = None
@@ -505,7 +510,7 @@ class PrinterWorker(QObject):
             self.jobStarted.emit(t.item_id, dict(copy=copy, copies=max(1, t.copies), width=rip.width,
                                                  height=rip.height, dpi=rip.settings.dpi,
                                                  row_um=profile.row_um, media=mpath, sink=live,
-                                                 passes=rip.planner().total_passes))
+                                                 passes=total_passes))
             try:
                 rep = job.run()
                 reports.append(rep.as_dict())
