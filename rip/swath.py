@@ -66,9 +66,10 @@ class PassPlanner:
         self._remap = self._dead_nozzle_remap()
         self.mask = mask
         self._qmask, self._sel = self._pass_mask(mask)
-        # one pass: whole 8 x 8 blocks of dots move at once (`_pack_pass1`); the general
-        # kernel gives the same words (tests/test_screen.py switches this off to compare)
-        self.block_pack = passes == 1
+        self._mask_rows, self._mask_index = self._mask_bit_rows()
+        # whole 8 x 8 blocks of dots move at once (`_pack_pass_blocks`); the per-dot kernel
+        # gives the same words (tests/test_screen.py switches this off to compare)
+        self.block_pack = True
         hpc = profile.heads_per_color
         # per head: nozzle -> slot
         self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
@@ -153,6 +154,23 @@ class PassPlanner:
             sel[c] = np.take_along_axis(self._remap[c], np.asarray(jsel, np.int64), axis=1)
         return np.ascontiguousarray(qmask), sel
 
+    def _mask_bit_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pass mask as packed bits, for the block packer: rows (U, th, N, tw / 8) and
+        index (4, A) such that bit x (x = 0 in bit 7 of byte 0, repeating every tw columns)
+        of rows[index[c, r mod A], r mod th, j] is set where the mask gives the dot at
+        (r, x) of colour c to pass-in-row j.  Colours and row phases whose selection is the
+        same share a row set (without dead nozzles or feathering there is one)."""
+        th, tw = self._qmask.shape
+        assert tw % 8 == 0, "the pass mask tile must be whole bytes wide"
+        sel = self._sel.reshape(-1, self._sel.shape[-1])               # (4 * A, levels)
+        unique, index = np.unique(sel, axis=0, return_inverse=True)
+        rows = np.empty((len(unique), th, self.n, tw // 8), np.uint8)
+        j = np.arange(self.n, dtype=np.int16)[None, :, None]
+        for u, srow in enumerate(unique):
+            jsel = srow[self._qmask]                                  # (th, tw): j of each dot
+            rows[u] = np.packbits(jsel[:, None, :] == j, axis=-1)
+        return rows, index.reshape(self._sel.shape[:2]).astype(np.int64)
+
     # -- streaming ----------------------------------------------------------------------
     def feed(self, band: np.ndarray) -> list[PassData]:
         """Add the next halftone rows (h, W, 4) of 0/1; returns the passes now complete."""
@@ -229,10 +247,10 @@ class PassPlanner:
         if self.block_pack:
             words8 = words.view(np.uint8)                   # (heads, fires, 16), little-endian
             run_parallel(
-                (lambda i=i, a=a, b=b: _pack_pass1(
+                (lambda i=i, a=a, b=b: _pack_pass_blocks(
                     self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
-                    self.s0, self._slot_table, channel, y_rows, cols, hpc, spread_lo, a, b,
-                    words8, dots_parts[i], spans[i]))
+                    self.s0, self._mask_rows, self._mask_index, self._slot_table, channel,
+                    y_rows, cols, hpc, spread_lo, a, b, words8, dots_parts[i], spans[i]))
                 for i, (a, b) in enumerate(parts))
         else:
             run_parallel(
@@ -324,16 +342,21 @@ def _popcount(x):
 
 
 @njit(cache=True, nogil=True)
-def _pack_pass1(buf, width, base, lo, hi, top, p, advance, n, s0, slot_table,
-                head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words8, dots, span):
-    """One-pass jobs: every dot under a live nozzle is this pass's, so whole 8 x 8 blocks
-    (8 nozzles x 8 columns) move at once: the 8 nozzles' bytes of packed dots, transposed,
-    are the 8 columns' bytes of nozzle bits.  words8 is the words array as bytes
-    (heads, fires, 16): byte g of a fire holds nozzles 8g .. 8g+7, bit z & 7.  span
-    [lo, hi) widens to the fires that got a dot."""
+def _pack_pass_blocks(buf, width, base, lo, hi, top, p, advance, n, s0, mask_rows, mask_index,
+                      slot_table, head_channel, head_y, head_col, hpc, spread_lo, h0, h1,
+                      words8, dots, span):
+    """Whole 8 x 8 blocks (8 nozzles x 8 columns) at once: each nozzle's byte of packed dots
+    ANDed with its byte of the pass mask (the dots this pass prints of that row,
+    `PassPlanner._mask_bit_rows`), the 8 bytes transposed into the 8 columns' bytes of
+    nozzle bits.  words8 is the words array as bytes (heads, fires, 16): byte g of a fire
+    holds nozzles 8g .. 8g+7, bit z & 7.  span [lo, hi) widens to the fires that got a dot.
+    Same words as `_pack_pass` (tests/test_screen.py)."""
     flat = buf.reshape(-1)                          # the window as bytes: row, colour, byte
+    masks = mask_rows.reshape(-1)
+    th, tb = mask_rows.shape[1], mask_rows.shape[3]
     wb = buf.shape[2]
     offs = np.empty(8, np.int64)
+    moffs = np.empty(8, np.int64)
     for h in range(h0, h1):
         ch = head_channel[h]
         t_off = -head_col[h] - spread_lo
@@ -343,23 +366,36 @@ def _pack_pass1(buf, width, base, lo, hi, top, p, advance, n, s0, slot_table,
             for k in range(8):
                 r = _nozzle_row(h, 8 * g + k, ch, head_y, hpc, s0, n, advance, slot_table,
                                 top, lo, hi)
-                row = r - base if r >= 0 else lo - base          # a real row, masked off
-                offs[k] = (row * 4 + ch) * wb
+                rr = r if r >= 0 else lo                         # a real row, masked off
+                offs[k] = ((rr - base) * 4 + ch) * wb
+                j = p - rr // advance
+                j = min(max(j, 0), n - 1)
+                moffs[k] = ((mask_index[ch, rr % advance] * th + rr % th) * n + j) * tb
                 if r >= 0:
                     keep |= np.uint64(0xFF) << np.uint64(8 * k)
             if keep == 0:
                 continue
             o0, o1, o2, o3 = offs[0], offs[1], offs[2], offs[3]
             o4, o5, o6, o7 = offs[4], offs[5], offs[6], offs[7]
+            m0, m1, m2, m3 = moffs[0], moffs[1], moffs[2], moffs[3]
+            m4, m5, m6, m7 = moffs[4], moffs[5], moffs[6], moffs[7]
             first_xb = -1
             last_xb = -1
             first_x = np.uint64(0)
             last_x = np.uint64(0)
+            mb = 0                                        # xb mod tb: the mask tile's byte
             for xb in range(wb):
-                x = (np.uint64(flat[o0 + xb]) | np.uint64(flat[o1 + xb]) << np.uint64(8)
-                     | np.uint64(flat[o2 + xb]) << np.uint64(16) | np.uint64(flat[o3 + xb]) << np.uint64(24)
-                     | np.uint64(flat[o4 + xb]) << np.uint64(32) | np.uint64(flat[o5 + xb]) << np.uint64(40)
-                     | np.uint64(flat[o6 + xb]) << np.uint64(48) | np.uint64(flat[o7 + xb]) << np.uint64(56))
+                x = (np.uint64(flat[o0 + xb] & masks[m0 + mb])
+                     | np.uint64(flat[o1 + xb] & masks[m1 + mb]) << np.uint64(8)
+                     | np.uint64(flat[o2 + xb] & masks[m2 + mb]) << np.uint64(16)
+                     | np.uint64(flat[o3 + xb] & masks[m3 + mb]) << np.uint64(24)
+                     | np.uint64(flat[o4 + xb] & masks[m4 + mb]) << np.uint64(32)
+                     | np.uint64(flat[o5 + xb] & masks[m5 + mb]) << np.uint64(40)
+                     | np.uint64(flat[o6 + xb] & masks[m6 + mb]) << np.uint64(48)
+                     | np.uint64(flat[o7 + xb] & masks[m7 + mb]) << np.uint64(56))
+                mb += 1
+                if mb == tb:
+                    mb = 0
                 x &= keep
                 if x == 0:
                     continue

@@ -1,5 +1,5 @@
 """The fast paths give the same bits as the reference ones: the fused ordered screen
-(rip/screen.py) against Separator + Halftoner + pack_dots, and the one-pass block packer
+(rip/screen.py) against Separator + Halftoner + pack_dots, and the block packer
 against the general pass packer."""
 
 import numpy as np
@@ -110,23 +110,22 @@ def test_pack_unpack_round_trip():
     assert np.array_equal(unpack_dots(bits, 37), dots)
 
 
-@pytest.mark.parametrize("width", [1, 9, 300, 1003])
-@pytest.mark.parametrize("density", [0.02, 0.5, 1.0])
-def test_block_packer_equals_general_packer(profile, width, density):
-    rng = np.random.default_rng(width)
-    height = 700
-    dots = (rng.random((height, width, 4)) < density).astype(np.uint8)
-    dots[100:180] = 0                              # blank rows: skipped passes
+def plan_both(profile, dots, passes=1, mask="checker", bidir=False, band=64):
+    """The same job planned with the block packer and with the per-dot packer."""
+    height, width = dots.shape[:2]
 
     def plan(block):
-        planner = PassPlanner(profile, width, height, 300, 1)
+        planner = PassPlanner(profile, width, height, 300, passes, bidir, mask)
         planner.block_pack = block
         out = []
-        for a in range(0, height, 64):
-            out += planner.feed_packed(pack_dots(dots[a:a + 64]))
+        for a in range(0, height, band):
+            out += planner.feed_packed(pack_dots(dots[a:a + band]))
         return out + planner.finish()
 
-    fast, slow = plan(True), plan(False)
+    return plan(True), plan(False)
+
+
+def assert_same_passes(fast, slow, dots):
     assert len(fast) == len(slow) > 1
     for f, s in zip(fast, slow):
         assert (f.index, f.direction, f.top_row, f.first_column) == \
@@ -134,3 +133,29 @@ def test_block_packer_equals_general_packer(profile, width, density):
         assert np.array_equal(f.words, s.words)
         assert np.array_equal(f.dots, s.dots)
     assert sum(int(f.dots.sum()) for f in fast) == int(dots.sum())
+
+
+@pytest.mark.parametrize("width", [1, 9, 300, 1003])
+@pytest.mark.parametrize("density", [0.02, 0.5, 1.0])
+def test_block_packer_equals_general_packer(profile, width, density):
+    rng = np.random.default_rng(width)
+    dots = (rng.random((700, width, 4)) < density).astype(np.uint8)
+    dots[100:180] = 0                              # blank rows: skipped passes
+    assert_same_passes(*plan_both(profile, dots), dots)
+
+
+@pytest.mark.parametrize("passes", [2, 3, 4, 6, 8])
+@pytest.mark.parametrize("mask", ["checker", "random", "feather"])
+def test_block_packer_equals_general_packer_multipass(profile, passes, mask):
+    rng = np.random.default_rng(passes)
+    dots = (rng.random((500, 259, 4)) < 0.4).astype(np.uint8)
+    assert_same_passes(*plan_both(profile, dots, passes, mask, bidir=passes % 2 == 0, band=37),
+                       dots)
+
+
+def test_block_packer_with_dead_nozzles(tmp_path):
+    from test_swath import variant_profile
+    prof = variant_profile(tmp_path, dead=[("M1", 57), ("K2", 3), ("C1", 10), ("C2", 10)])
+    dots = (np.random.default_rng(9).random((400, 130, 4)) < 0.5).astype(np.uint8)
+    for passes, mask in ((2, "checker"), (3, "feather"), (4, "random")):
+        assert_same_passes(*plan_both(prof, dots, passes, mask), dots)
