@@ -278,6 +278,12 @@ def test_bidirectional_calibration_writes_the_user_profile(qtbot, tmp_path):
     qtbot.mouseClick(dlg.save_btn, Qt.LeftButton)
     assert load_profile(user).bidir_offset_columns[150] == 2
     assert load_profile(DEFAULT_PROFILE).bidir_offset_columns[150] == 0
+    assert dlg.view.suggested == 2
+    # the next pattern in the same dialog does not keep the bidir suggestion's box
+    choose(dlg.pattern, "head-align")
+    qtbot.mouseClick(dlg.print_btn, Qt.LeftButton)
+    qtbot.waitUntil(lambda: dlg.media is not None, timeout=LONG)
+    assert dlg.view.suggested is None
     dlg.close()
     # the calibrated user profile now prints bidirectionally exactly on the same machine
     src = write_cmyk_tiff(tmp_path / "bi.tif", random_planes(400, 200, seed=7))

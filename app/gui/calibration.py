@@ -575,6 +575,7 @@ class CalibrationDialog(QDialog):
 
     def _suggest(self) -> None:
         m = self.media
+        self.view.suggested = None          # a bidir suggestion must not outlive its pattern
         if m is None:
             return
         if self.kind == "bidir-align":
