@@ -530,7 +530,7 @@ class Worker(threading.Thread):
 
     def _run_job(self, job_id: int) -> None:
         from ..rip.load import ImageError
-        from ..rip.pipeline import RipJob, RipSettings
+        from ..rip.pipeline import RipJob
         from .job import JobCancelled, JobError, PrintJob
         from .link import DeviceError, LinkError
         from .stream import StreamError

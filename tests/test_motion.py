@@ -3,7 +3,6 @@ tests reproduced, the production line, and the FPGA-facing invariants.  docs/mot
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np

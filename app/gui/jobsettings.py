@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ...rip.pipeline import RipSettings
 from ...rip.profile import Profile, load_profile
+from ...rip.swath import PASS_MASKS
 
 # placement size modes offered by the GUI -> rip.place.Placement fields
 SIZE_MODES = {
@@ -36,12 +37,6 @@ INTENT_NAMES = {
     "saturation": "Saturation",
     "absolute": "Absolute colorimetric",
 }
-
-
-def pass_masks() -> tuple[str, ...]:
-    """The planner's pass masks (rip/swath.py)."""
-    from ...rip.swath import PASS_MASKS
-    return tuple(PASS_MASKS)
 
 
 @functools.lru_cache(maxsize=16)
@@ -111,9 +106,8 @@ class JobSettings:
             self.passes = 1
         if self.dither not in METHODS:
             self.dither = "fs"
-        masks = pass_masks()
-        if masks and self.pass_mask not in masks:
-            self.pass_mask = masks[0]
+        if self.pass_mask not in PASS_MASKS:
+            self.pass_mask = PASS_MASKS[0]
         if self.intent not in INTENT_NAMES:
             self.intent = "relative"
         if self.size_mode not in SIZE_MODES:

@@ -144,9 +144,9 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
         width_mm = W * k / profile.counts_per_inch * 25.4
         height_mm = H * profile.row_um / 1000.0
         pw, ph = preview_size(width_mm, height_mm, W, H, max_px)
-        quarter = js.rotate in (90, 270) and hasattr(rs, "placement")
-        rotate = int(js.rotate) if hasattr(rs, "placement") else 0
-        mirror = bool(js.mirror) if hasattr(rs, "placement") else False
+        quarter = js.rotate in (90, 270)
+        rotate = int(js.rotate)
+        mirror = bool(js.mirror)
         src = open_image(path)
         try:
             tw, th = (ph, pw) if quarter else (pw, ph)

@@ -10,9 +10,10 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog
                                QSpinBox, QToolButton, QVBoxLayout, QWidget)
 
 from ...rip.halftone import METHODS
+from ...rip.swath import PASS_MASKS
 from .estimate import Estimate, fmt_duration, fmt_ml
 from .jobsettings import (ALIGN_NAMES, DITHER_NAMES, FILTERS, INTENT_NAMES, ROTATIONS, SIZE_MODES,
-                          JobSettings, pass_masks)
+                          JobSettings)
 
 MASK_NAMES = {"checker": "Checkerboard", "random": "Random (blue noise)", "feather": "Feathered edges"}
 
@@ -99,9 +100,8 @@ class SettingsPanel(QWidget):
         self.pass_mask.setObjectName("pass_mask")
         self.pass_mask.setToolTip("Which pass prints which dot: checkerboard, random (blue noise), "
                                   "or feathered pass edges")
-        for m in pass_masks() or ("checker",):
+        for m in PASS_MASKS:
             self.pass_mask.addItem(MASK_NAMES.get(m, m), m)
-        self.pass_mask.setEnabled(bool(pass_masks()))
         f.addRow("Pass mask", self.pass_mask)
         self.direction = QComboBox()
         self.direction.setObjectName("direction")
