@@ -19,6 +19,7 @@ from .link import DeviceError, LinkError
 from .stream import PassStreamer, StreamError
 from ..rip.load import ImageError
 from ..rip.pipeline import RipJob, prefetch
+from ..rip.profile import ProfileError
 from ..rip.swath import PassData
 
 log = logging.getLogger("wideprint.job")
@@ -384,13 +385,16 @@ class PrintJob:
         rep.state = "printing"
         rep.width_dots, rep.height_rows = rip.width, rip.height
         try:
+            try:                                 # planned first: a refusal moves nothing
+                planner = rip.planner()
+            except ProfileError as exc:          # e.g. dead nozzles a single pass cannot avoid
+                raise JobError(f"{rip.path}: {exc}") from None
             self.line_speed()
             self._state("connecting")
             self._recovering(self.prepare, "connecting")
             self._read_head_temps()
             self._state("printing")
             x0 = self.resume["x0"] if self.resume else self._recovering(self.place, "placing the job")
-            planner = rip.planner()
             rep.passes_total = self.telemetry.passes_total = planner.total_passes
             link = self.dev.link
             top = self.top_rows()                # the top margin: image row 0 that much later

@@ -121,7 +121,6 @@ def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
     with pytest.raises(JobError, match="late.tif: corrupt TIFF data"):
         job.run()
     assert job.report.state == "failed" and job.report.passes_printed > 0
-    from wideprint.driver import protocol as P
     assert dev.emulator.fpga.we_en is False and not dev.emulator.busy()
     good = write_cmyk_tiff(tmp_path / "good.tif", random_planes(100, 80, seed=18))
     dev.emulator.media_path = str(tmp_path / "m2.tif")
@@ -182,5 +181,26 @@ def test_position_off_the_paper_is_refused_before_printing(tmp_path, profile, al
         with pytest.raises(JobError, match=msg):
             PrintJob(dev, RipJob(str(src), RipSettings(placement=pl), profile)).run()
         assert dev.emulator.jobs_done == {} and dev.emulator.blocks_total == 0
+    finally:
+        dev.emulator.close()
+
+
+def test_one_pass_job_that_dead_nozzles_make_unprintable_fails_before_anything_moves(tmp_path):
+    """The planner's refusal is the job's failure (the CLI and the server go on with the
+    next job), and it comes before the printer is touched."""
+    from test_swath import variant_profile
+    prof = variant_profile(tmp_path, dead=[("M1", 57)])
+    src = write_cmyk_tiff(tmp_path / "one.tif", random_planes(60, 50, seed=4))
+    dev = open_device("emulator", prof, None, media_path=str(tmp_path / "m.tif"))
+    try:
+        job = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=1), prof))
+        with pytest.raises(JobError, match=r"one.tif: .*dead nozzles M1:57 leave colour M rows "
+                                           r"unprintable with 1 pass\(es\); use more passes"):
+            job.run()
+        assert job.report.state == "failed"
+        assert not dev.emulator.homed and dev.emulator.blocks_total == 0
+        # the same file and profile with two passes prints exactly
+        rep, _ = print_on_emulator(src, RipSettings(placement=PX, passes=2), prof, tmp_path / "m2.tif")
+        assert np.array_equal(read_planes(tmp_path / "m2.tif"), random_planes(60, 50, seed=4))
     finally:
         dev.emulator.close()
