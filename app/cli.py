@@ -14,42 +14,11 @@ EXIT_OK, EXIT_JOB_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
 
 
 def _rip_options(p: argparse.ArgumentParser) -> None:
-    from ..rip.halftone import METHODS
-    p.add_argument("--dither", choices=METHODS, default="fs", help="halftone (default fs)")
-    p.add_argument("--passes", type=int, choices=(1, 2, 3, 4, 6, 8), default=1)
-    p.add_argument("--bidir", action="store_true", help="print in both carriage directions")
-    p.add_argument("--pass-mask", choices=("checker", "random", "feather"), default="checker",
-                   help="how dots are shared between passes (docs/geometry.md)")
-    p.add_argument("--dpi", type=int, choices=(150, 300, 600), default=300,
-                   help="scan-direction resolution (encoder trigger mode)")
-    p.add_argument("--ink-limit", type=float, metavar="PERCENT",
-                   help="total ink limit, e.g. 280")
-    p.add_argument("--input-icc", metavar="FILE", help="input ICC profile (overrides embedded)")
-    p.add_argument("--output-icc", metavar="FILE", help="output CMYK ICC profile")
-    p.add_argument("--intent", default="relative",
-                   choices=("perceptual", "relative", "saturation", "absolute"))
-    p.add_argument("--profile", metavar="TOML", help="printer profile (default: resources/printers/default.toml)")
-    g = p.add_argument_group("placement (docs/placement.md)")
-    g.add_argument("--size", choices=("physical", "pixels"), default="physical",
-                   help="physical: from the file's resolution (300 ppi if absent); "
-                        "pixels: 1 image pixel = 1 device dot")
-    g.add_argument("--width-mm", type=float, help="print this wide (keeps the aspect ratio)")
-    g.add_argument("--height-mm", type=float, help="print this high")
-    g.add_argument("--scale", type=float, help="multiply the physical size")
-    g.add_argument("--fit-width-mm", type=float, help="scale to exactly this width")
-    g.add_argument("--rotate", type=int, choices=(0, 90, 180, 270), default=0,
-                   help="degrees clockwise")
-    g.add_argument("--mirror", action="store_true", help="mirror (backlit film)")
-    g.add_argument("--filter", default="lanczos3", choices=("nearest", "linear", "cubic", "lanczos3"),
-                   help="resampling filter")
-    g.add_argument("--align", choices=("left", "center", "right"), default="left",
-                   help="across the paper, within the side margins")
-    g.add_argument("--x-mm", type=float, default=0.0,
-                   help="then shift the image this far right (negative: left)")
-    g.add_argument("--margin-mm", type=float,
-                   help="side margins (default: the printer profile's, 5 mm)")
-    g.add_argument("--top-mm", type=float, default=0.0,
-                   help="blank paper before the image")
+    """The RIP and placement options: from the one settings schema (rip/settings.py)."""
+    from ..rip.settings import add_arguments
+    p.add_argument("--profile", metavar="TOML",
+                   help="printer profile (default: resources/printers/default.toml)")
+    add_arguments(p)
 
 
 def _emulator_outputs(p: argparse.ArgumentParser) -> None:
@@ -90,18 +59,11 @@ def _close_device(dev, args) -> None:
     dev.close()
 
 
-def _settings(args):
-    from ..rip.pipeline import RipSettings
-    from ..rip.place import Placement
-    placement = Placement(size=args.size, width_mm=args.width_mm, height_mm=args.height_mm,
-                          scale=args.scale, fit_width_mm=args.fit_width_mm, rotate=args.rotate,
-                          mirror=args.mirror, filter=args.filter, align=args.align,
-                          x_mm=args.x_mm, margin_mm=args.margin_mm, top_mm=args.top_mm)
-    placement.check()
-    return RipSettings(placement=placement, dpi=args.dpi, passes=args.passes, bidir=args.bidir, dither=args.dither,
-                       pass_mask=args.pass_mask,
-                       ink_limit=args.ink_limit, input_icc=args.input_icc,
-                       output_icc=args.output_icc, intent=args.intent)
+def _settings(args, profile):
+    """RipSettings from the options given, the schema's defaults for the rest, checked
+    against the printer profile (ValueError naming the setting)."""
+    from ..rip.settings import from_mapping, mapping_from_args
+    return from_mapping(mapping_from_args(args), profile)
 
 
 def _profile(args):
@@ -124,12 +86,13 @@ def cmd_rip(args) -> int:
     from ..rip.load import ImageError
     from ..rip.pipeline import RipJob
     try:
-        job = RipJob(args.file, _settings(args), _profile(args))
+        profile = _profile(args)
+        job = RipJob(args.file, _settings(args, profile), profile)
         dots = job.write_planes(args.output)
     except (ImageError, ValueError, OSError) as exc:
         print(f"wideprint rip: {exc}", file=sys.stderr)
         return EXIT_JOB_FAILED
-    print(f"{args.output}: {job.width} x {job.height} dots at {args.dpi} x "
+    print(f"{args.output}: {job.width} x {job.height} dots at {job.settings.dpi} x "
           f"{job.dpi_y:.1f} dpi, drops C {dots[0]} M {dots[1]} Y {dots[2]} K {dots[3]}")
     return EXIT_OK
 
@@ -147,7 +110,7 @@ def _expand(files: list[str]) -> list[str]:
 
 def cmd_print(args) -> int:
     from ..device_sim.faults import Faults
-    from ..driver.device import open_device
+    from .devices import open_device
     from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
     from ..rip.load import ImageError
@@ -158,7 +121,7 @@ def cmd_print(args) -> int:
     try:
         profile = _profile(args)
         faults = Faults.parse(args.inject)
-        settings = _settings(args)
+        settings = _settings(args, profile)
     except ValueError as exc:
         print(f"wideprint print: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -257,7 +220,7 @@ def cmd_print(args) -> int:
 
 def cmd_test_print(args) -> int:
     from ..device_sim.faults import Faults
-    from ..driver.device import open_device
+    from .devices import open_device
     from ..driver.job import JobError, PrintJob
     from ..driver.link import LinkError
     from ..rip.testprints import PatternJob
@@ -424,7 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)
 
-    from ..rip.testprints import PATTERNS
+    from ..rip.settings import TEST_PATTERNS as PATTERNS, setting
     p = sub.add_parser("test-print", help="print a test pattern (nozzle check, line, sawtooth, "
                        "bidirectional and head alignment)")
     p.add_argument("pattern", choices=PATTERNS)
@@ -435,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--head", default="K1", help="head for line and sawtooth (default K1)")
     p.add_argument("--nozzle", type=int, default=64, help="nozzle for line (1..126)")
     p.add_argument("--width-mm", type=float, default=100.0, help="pattern length along the sweep")
-    p.add_argument("--dpi", type=int, choices=(150, 300, 600), default=150)
+    p.add_argument("--dpi", type=int, choices=setting("dpi").choices, default=150,
+                   help="resolution of the pattern (default 150, the thesis' test mode)")
     p.add_argument("--speed", type=float, metavar="MM_S", help="carriage speed (default: profile)")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE")
     p.add_argument("--event-log", metavar="JSONL")

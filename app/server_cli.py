@@ -32,7 +32,7 @@ class Client:
 
     def __init__(self, state_dir: str | os.PathLike | None = None, url: str | None = None,
                  token: str | None = None, timeout: float = 60.0):
-        from ..driver.server import SERVER_FILE, TOKEN_FILE, default_state_dir
+        from .server.config import SERVER_FILE, TOKEN_FILE, default_state_dir
         self.state_dir = Path(state_dir) if state_dir else default_state_dir()
         if url is None:
             try:
@@ -199,7 +199,7 @@ def _fail(cmd: str, exc: Exception) -> int:
 
 def cmd_serve(args) -> int:
     import logging
-    from ..driver.server import ServerConfig, default_state_dir, serve
+    from .server import ServerConfig, default_state_dir, serve
     logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose_server else logging.INFO)
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.WARNING,
@@ -228,13 +228,10 @@ def cmd_serve(args) -> int:
 
 
 def _settings_from(args) -> dict:
-    s = {}
-    for key in ("dpi", "passes", "bidir", "dither", "intent", "ink_limit", "input_icc",
-                "output_icc"):
-        v = getattr(args, key, None)
-        if v is not None:
-            s[key] = v
-    return s
+    """The print options given on the command line (the settings schema's mapping); the
+    server overlays them on the preset and validates them against its printer profile."""
+    from ..rip.settings import mapping_from_args
+    return mapping_from_args(args)
 
 
 def _expand(files: list[str]) -> list[Path]:
@@ -438,8 +435,8 @@ def _client_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
 def add_parser(sub) -> None:
     """Add serve, submit, queue, cancel, hold, release, requeue, status, presets and report
     to the `wideprint` command's subparsers."""
-    from ..driver.server import DEFAULT_PORT
-    from ..rip.halftone import METHODS
+    from .server.config import DEFAULT_PORT
+    from ..rip.settings import add_arguments as add_settings_arguments
 
     p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
     p.add_argument("--device", default="emulator",
@@ -479,14 +476,9 @@ def add_parser(sub) -> None:
     p.add_argument("--json", action="store_true")
     p.add_argument("--wait", type=float, nargs="?", const=3600.0, metavar="S",
                    help="wait until the jobs have printed (exit 1 if any did not)")
-    p.add_argument("--dither", choices=METHODS)
-    p.add_argument("--passes", type=int, choices=(1, 2, 3, 4, 6, 8))
-    p.add_argument("--bidir", action=argparse.BooleanOptionalAction, default=None)
-    p.add_argument("--dpi", type=int, choices=(150, 300, 600))
-    p.add_argument("--ink-limit", type=float, metavar="PERCENT")
-    p.add_argument("--input-icc", metavar="NAME", help="an ICC profile in the server's icc/ folder")
-    p.add_argument("--output-icc", metavar="NAME", help="an ICC profile in the server's icc/ folder")
-    p.add_argument("--intent", choices=("perceptual", "relative", "saturation", "absolute"))
+    # every print option of `wideprint print`, from the one settings schema; ICC profiles
+    # are named from the server's icc/ folder
+    add_settings_arguments(p)
     p.set_defaults(func=cmd_submit)
 
     p = _client_parser(sub, "queue", "list the print server's queue")

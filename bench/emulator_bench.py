@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipSettings
 from wideprint.rip.profile import load_profile

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from wideprint.device_sim.faults import Faults
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.profile import DEFAULT_PROFILE, load_profile
 

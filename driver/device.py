@@ -1,21 +1,21 @@
-"""Opening a printer from a device spec (docs/driver.md):
+"""The host's handle on one printer, and opening the real links (docs/driver.md).
 
-    emulator                      in-process emulator (tests, demos)
-    emulator-usb                  in-process emulator, data channel through pyusb
+A `Device` is a command link (serial, docs/protocol.md section 2) plus a data channel
+(section 3) plus the printer profile the host drives it with.  Which concrete device a
+spec names (the in-process emulator, a standalone emulator, a real printer) is decided
+in app/devices.py; the driver only knows the links and what timing a device needs.
+
     serial=PORT,data=URL[,baud=N] a real or standalone-emulated printer
         PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT (pyserial)
         URL:  usb://VID:PID[/SERIAL]   USB bulk (libusb)
               /dev/NODE                the PCI card's device node (or a pty stand-in)
               tcp://HOST:PORT          the standalone emulator's data port
-              usb-emu://HOST:PORT      the standalone emulator as a USB device (pyusb)
-
-and the host-side printer handle the job talks to.
 """
 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from . import protocol as P
 from .link import CommandLink, LinkError
@@ -23,15 +23,31 @@ from .transport import NodeData, TcpData, UsbData
 from ..rip.profile import Profile
 
 
+@dataclass(frozen=True)
+class Timing:
+    """How the host paces its polling and retries for one device.  A real printer (or a
+    standalone emulator) answers over a wire in real time: poll status every 10 ms and
+    back off before reconnecting.  A device that answers synchronously in-process has
+    nothing to wait for, so it carries zeros (docs/driver.md, "Timing")."""
+    poll_interval_s: float = 0.01
+    reconnect_backoff_s: float = 0.05      # x the attempt number
+
+    @classmethod
+    def synchronous(cls) -> "Timing":
+        return cls(0.0, 0.0)
+
+
 @dataclass
 class Device:
-    """The host's handle on one printer: command link + data channel (+ the emulator
-    object when it runs in-process, for tests and media output)."""
+    """The host's handle on one printer: command link + data channel + printer profile.
+    `emulator` is an opaque handle the application attaches when the device is an
+    in-process emulator (for its media output); nothing in the driver looks at it."""
     link: CommandLink
     data: object
     profile: Profile
     emulator: object | None = None
     info: dict | None = None
+    timing: Timing = field(default_factory=Timing)
 
     def connect(self) -> dict:
         self.link.handshake()
@@ -57,15 +73,11 @@ class Device:
 
 
 def open_data(url: str):
-    """A data-channel transport from its URL."""
+    """A data-channel transport from its URL (the real transports)."""
     try:
         if url.startswith("tcp://"):
             host, _, port = url[6:].rpartition(":")
             return TcpData(host or "127.0.0.1", int(port))
-        if url.startswith("usb-emu://"):
-            from ..device_sim.usb_backend import EmulatorUsbBackend
-            host, _, port = url[10:].rpartition(":")
-            return UsbData(backend=EmulatorUsbBackend(TcpData(host or "127.0.0.1", int(port))))
         if url.startswith("usb://"):
             ids, _, serial = url[6:].partition("/")
             vid, _, pid = ids.partition(":")
@@ -74,40 +86,38 @@ def open_data(url: str):
             return NodeData(url)
     except (OSError, ConnectionError) as exc:
         raise LinkError(f"cannot open data channel {url}: {exc}") from None
-    raise ValueError(f"data channel {url!r}: use usb://VID:PID[/SERIAL], /dev/NODE, "
-                     f"tcp://HOST:PORT or usb-emu://HOST:PORT")
+    raise ValueError(f"data channel {url!r}: use usb://VID:PID[/SERIAL], /dev/NODE or "
+                     f"tcp://HOST:PORT")
 
 
-def open_device(spec: str, profile: Profile, faults=None, media_path=None,
-                event_log=None, machine_profile: Profile | None = None,
-                **emulator_options) -> Device:
-    """The in-process emulator is built from `machine_profile` (the machine as it really
-    is; default: the job's profile) and emulator_options (vcd_path, vcd_window,
-    record_latched)."""
-    spec = spec.strip()
-    timeout = float(profile.raw["link"]["response_timeout_s"])
-    if spec in ("emulator", "emulator-usb"):
-        from ..device_sim.endpoints import in_process
-        from ..device_sim.printer import Printer
-        printer = Printer(machine_profile or profile, faults, media_path=media_path,
-                          event_log=event_log, **emulator_options)
-        serial_port, data = in_process(printer)
-        if spec == "emulator-usb":
-            from ..device_sim.usb_backend import EmulatorUsbBackend
-            data = UsbData(backend=EmulatorUsbBackend(data))
-        return Device(CommandLink(serial_port, timeout), data, profile, emulator=printer)
+def parse_link_spec(spec: str) -> dict:
+    """'serial=PORT,data=URL[,baud=N]' -> its parts; ValueError saying what is missing."""
     parts = dict(p.split("=", 1) for p in spec.split(",") if "=" in p)
     if "serial" not in parts or "data" not in parts:
-        raise ValueError(f"device spec {spec!r}: use 'emulator' or 'serial=PORT,data=URL'")
+        raise ValueError(f"device spec {spec!r}: use 'emulator', 'emulator-usb' or "
+                         f"'serial=PORT,data=URL' (docs/driver.md)")
+    return parts
+
+
+def open_serial(port: str, profile: Profile, baud: int | None = None):
+    """The command channel's serial port (pyserial: a tty, a pty or socket://HOST:PORT)."""
     import serial  # pyserial
-    baud = int(parts.get("baud", profile.raw["link"]["baud"]))
     try:
-        port = serial.serial_for_url(parts["serial"], baudrate=baud, timeout=0.02)
+        return serial.serial_for_url(port, baudrate=int(baud or profile.raw["link"]["baud"]),
+                                     timeout=0.02)
     except (serial.SerialException, ValueError) as exc:
-        raise LinkError(f"cannot open {parts['serial']}: {exc}") from None
+        raise LinkError(f"cannot open {port}: {exc}") from None
+
+
+def open_link_device(spec: str, profile: Profile, data=None) -> Device:
+    """A printer on real links from 'serial=PORT,data=URL[,baud=N]'.  `data`: an already
+    opened data channel (the application's own transports), else opened from the URL."""
+    parts = parse_link_spec(spec)
+    port = open_serial(parts["serial"], profile, parts.get("baud"))
     try:
-        data = open_data(parts["data"])
+        if data is None:
+            data = open_data(parts["data"])
     except Exception:
         port.close()
         raise
-    return Device(CommandLink(port, timeout), data, profile)
+    return Device(CommandLink(port, float(profile.raw["link"]["response_timeout_s"])), data, profile)

@@ -146,7 +146,7 @@ class PrintJob:
         self.profile = device.profile
         self.report = JobReport(file=rip.path)
         self.on_event = on_event or (lambda kind, **kw: None)
-        self.poll_interval = 0.0 if device.emulator is not None else 0.01
+        self.poll_interval = device.timing.poll_interval_s
         self.control = JobControl()
         self.telemetry = Telemetry()
         self._state("queued")
@@ -313,7 +313,7 @@ class PrintJob:
                 return
             except (LinkError, OSError) as exc:
                 last = exc
-                time.sleep(0.05 * (attempt + 1) if self.dev.emulator is None else 0)
+                time.sleep(self.dev.timing.reconnect_backoff_s * (attempt + 1))
         raise LinkError(f"cannot reconnect to the printer: {last}")
 
     def print_pass(self, pd: PassData, x0: int) -> None:

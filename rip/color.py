@@ -30,7 +30,7 @@ __all__ = ["Separator", "INTENTS", "ink_limit_level"]
 
 log = logging.getLogger(__name__)
 
-INTENTS = ("perceptual", "relative", "saturation", "absolute")
+from .settings import INTENTS  # noqa: E402 - declared with the settings schema
 LUT3_SIZE = 33  # grid for 3-channel input (same as lcms for 8-bit RGB)
 
 

@@ -98,9 +98,8 @@ from .parallel import WORKERS, run_parallel
 __all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "mask_offsets",
            "threshold_tile"]
 
-METHODS = ("fs", "jarvis", "stucki", "bayer", "bluenoise")
-ERROR_DIFFUSION = ("fs", "jarvis", "stucki")
-ORDERED = ("bayer", "bluenoise")
+from .settings import METHODS, ORDERED  # noqa: E402 - declared with the settings schema
+ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
 BLUENOISE_PATH = Path(__file__).resolve().parent.parent / "resources" / "masks" / "bluenoise128.npy"
 

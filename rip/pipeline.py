@@ -14,34 +14,14 @@ from typing import Iterator
 import numpy as np
 
 from .color import Separator
-from .halftone import METHODS, ORDERED, Halftoner
+from .halftone import ORDERED, Halftoner
 from .load import ImageSource, open_image
-from .place import Placement, place
+from .place import place
 from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
 from .screen import OrderedScreen
+from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the settings schema's objects
 from .swath import PassData, PassPlanner, pack_dots, unpack_dots
-
-
-@dataclass
-class RipSettings:
-    dpi: int = 300
-    passes: int = 1
-    bidir: bool = False
-    dither: str = "fs"
-    pass_mask: str = "checker"
-    ink_limit: float | None = None
-    input_icc: str | None = None
-    output_icc: str | None = None
-    intent: str = "relative"
-    band_rows: int = 64          # rows per band: 64 keeps a 40,000 px wide job small
-    placement: Placement = field(default_factory=Placement)   # physical size by default
-
-    def check(self, profile: Profile) -> None:
-        if self.dither not in METHODS:
-            raise ValueError(f"dither must be one of {', '.join(METHODS)}, not {self.dither!r}")
-        profile.k(self.dpi)
-        self.placement.check()
 
 
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:

@@ -27,166 +27,26 @@ Streaming, memory bounded by bands (never by the image height):
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import tempfile
 import weakref
-from dataclasses import dataclass, replace
-from typing import Any, Iterator
+from dataclasses import replace
+from typing import Iterator
 
 import numpy as np
 
 from .load import ImageError, ImageSource, fetch_rows
+# the Placement settings object is declared with the settings schema (rip/settings.py)
+from .settings import (DEFAULT_PPI, FILTERS, MAX_SIDE, MM_PER_INCH, ROTATIONS,  # noqa: F401
+                       Placement)
 
 __all__ = ["Placement", "PlacedSource", "place", "FILTERS", "ROTATIONS", "MAX_SIDE", "DEFAULT_PPI"]
 
-#: resampling kernels (libvips names)
-FILTERS = ("nearest", "linear", "cubic", "lanczos3")
-#: clockwise rotations in degrees
-ROTATIONS = (0, 90, 180, 270)
-ALIGNS = ("left", "center", "right")
-#: largest placed image side, in device columns or rows (3.4 m at 600 dpi is 80,315 columns;
-#: 1,000,000 rows is 68.55 m of media)
-MAX_SIDE = 1_000_000
-#: resolution assumed for files without resolution tags, pixels per inch
-DEFAULT_PPI = 300.0
 #: side of the square tiles of the rotation spool, pixels
 SPOOL_TILE = 128
 #: free space left on the temporary file system after a spool is written
 DISK_RESERVE = 64 << 20
-MM_PER_INCH = 25.4
-
-
-def _round(x: float) -> int:
-    """Nearest integer, halves up (not banker's rounding)."""
-    return int(math.floor(x + 0.5))
-
-
-def _ppi(v: Any) -> float | None:
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) and v > 0 else None
-
-
-def _finite(name: str, v: Any) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"placement: {name} must be a number, not {v!r}") from None
-    if not math.isfinite(f):
-        raise ValueError(f"placement: {name} must be a finite number, not {v!r}")
-    return f
-
-
-def _positive(name: str, v: Any) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"placement: {name} must be a number, not {v!r}") from None
-    if not (math.isfinite(f) and f > 0):
-        raise ValueError(f"placement: {name} must be a positive number, not {v!r}")
-    return f
-
-
-@dataclass
-class Placement:
-    """Where and how large the image goes on the device grid (docs/placement.md)."""
-
-    size: str = "physical"  # "physical": from the file's xres/yres (DEFAULT_PPI when absent)
-    #                         "pixels": 1 image pixel = 1 device dot, no resampling
-    width_mm: float | None = None  # explicit size; with only one of them the aspect ratio is kept
-    height_mm: float | None = None
-    scale: float | None = None  # multiplies the physical size
-    fit_width_mm: float | None = None  # scale (keeping the aspect ratio) to exactly this width
-    rotate: int = 0  # 0, 90, 180, 270 degrees clockwise
-    mirror: bool = False  # horizontal mirror on the device (applied after rotation)
-    filter: str = "lanczos3"  # nearest | linear | cubic | lanczos3
-    # where the image goes on the measured paper (applied by the driver, driver/job.py):
-    align: str = "left"  # left | center | right, within the paper minus the side margins
-    x_mm: float = 0.0  # then shifted this far to the right (negative: to the left)
-    margin_mm: float | None = None  # side margins; None: the printer profile's [paper] margin_mm
-    top_mm: float = 0.0  # blank paper fed before the image's first row
-
-    def check(self) -> None:
-        """Raise ValueError naming the problem if the options are inconsistent."""
-        if self.size not in ("physical", "pixels"):
-            raise ValueError(f"placement: size must be 'physical' or 'pixels', not {self.size!r}")
-        if self.filter not in FILTERS:
-            raise ValueError(f"placement: filter must be one of {', '.join(FILTERS)}, not {self.filter!r}")
-        if isinstance(self.rotate, bool) or self.rotate not in ROTATIONS:
-            raise ValueError(f"placement: rotate must be 0, 90, 180 or 270 (degrees clockwise), not {self.rotate!r}")
-        if self.align not in ALIGNS:
-            raise ValueError(f"placement: align must be one of {', '.join(ALIGNS)}, not {self.align!r}")
-        _finite("x_mm", self.x_mm)
-        for name in ("top_mm", "margin_mm"):
-            v = getattr(self, name)
-            if v is not None and _finite(name, v) < 0:
-                raise ValueError(f"placement: {name} must not be negative, not {v!r}")
-        given = {n: getattr(self, n) for n in ("width_mm", "height_mm", "scale", "fit_width_mm")
-                 if getattr(self, n) is not None}
-        for name, v in given.items():
-            _positive(name, v)
-        if self.size == "pixels" and given:
-            raise ValueError("placement: size='pixels' places 1 image pixel per device dot; it cannot be "
-                             f"combined with {', '.join(given)}")
-        modes = [m for m, on in (("width_mm/height_mm", "width_mm" in given or "height_mm" in given),
-                                 ("scale", "scale" in given), ("fit_width_mm", "fit_width_mm" in given)) if on]
-        if len(modes) > 1:
-            raise ValueError(f"placement: give only one of {' or '.join(modes)}")
-
-    @property
-    def quarter_turn(self) -> bool:
-        return self.rotate in (90, 270)
-
-    def target_size(self, src_w: int, src_h: int, xres: float | None, yres: float | None,
-                    dpi: int, row_um: float) -> tuple[int, int]:
-        """(width in device columns, height in device rows) after rotation."""
-        self.check()
-        src_w, src_h = int(src_w), int(src_h)
-        if src_w < 1 or src_h < 1:
-            raise ValueError(f"placement: the source image is {src_w} x {src_h} px")
-        dpi = _positive("dpi", dpi)
-        row_um = _positive("row_um", row_um)
-        if self.size == "pixels":
-            w, h = (src_h, src_w) if self.quarter_turn else (src_w, src_h)
-            return _check_target(w, h, "")
-        xr, yr = _ppi(xres), _ppi(yres)
-        if xr is None and yr is None:
-            xr = yr = DEFAULT_PPI
-        xr, yr = xr or yr, yr or xr  # only one tag: square pixels
-        w_in, h_in = src_w / xr, src_h / yr  # physical size of the unrotated image
-        if self.quarter_turn:
-            w_in, h_in = h_in, w_in
-        if self.width_mm is not None and self.height_mm is not None:
-            w_in, h_in = float(self.width_mm) / MM_PER_INCH, float(self.height_mm) / MM_PER_INCH
-        elif self.width_mm is not None or self.fit_width_mm is not None:
-            want = float(self.width_mm if self.width_mm is not None else self.fit_width_mm) / MM_PER_INCH
-            w_in, h_in = want, h_in * want / w_in
-        elif self.height_mm is not None:
-            want = float(self.height_mm) / MM_PER_INCH
-            w_in, h_in = w_in * want / h_in, want
-        elif self.scale is not None:
-            w_in, h_in = w_in * float(self.scale), h_in * float(self.scale)
-        wf, hf = w_in * dpi, h_in * MM_PER_INCH * 1000.0 / row_um
-        if not (math.isfinite(wf) and math.isfinite(hf)) or wf > 10 * MAX_SIDE or hf > 10 * MAX_SIDE:
-            return _check_target(math.inf, math.inf, f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
-        return _check_target(_round(wf), _round(hf), f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
-
-
-def _check_target(w, h, what: str) -> tuple[int, int]:
-    if not (w >= 1 and h >= 1):
-        raise ValueError(f"placement: the placed image would be {w} x {h} dots{what}: nothing to print "
-                         f"(0 px); check the size options")
-    if w > MAX_SIDE or h > MAX_SIDE:
-        ws = "more than 10,000,000" if w == math.inf else f"{w:,}"
-        hs = "more than 10,000,000" if h == math.inf else f"{h:,}"
-        raise ValueError(f"placement: the placed image would be {ws} columns x {hs} rows{what}, "
-                         f"more than the limit of {MAX_SIDE:,} per side; check the size options and "
-                         f"the file's resolution")
-    return int(w), int(h)
 
 
 # --------------------------------------------------------------------------------------

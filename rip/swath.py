@@ -25,8 +25,7 @@ from numba import njit
 from .parallel import run_parallel, split
 from .profile import COLORS, Profile, ProfileError
 
-PASS_COUNTS = (1, 2, 3, 4, 6, 8)
-PASS_MASKS = ("checker", "random", "feather")
+from .settings import PASS_COUNTS, PASS_MASKS  # noqa: F401 - declared with the settings schema
 MASK_LEVELS = 256           # quantisation of the random / feather masks
 FEATHER = 0.25              # fraction of the nozzle run, at each end, that fades out
 

@@ -28,7 +28,7 @@ import numpy as np
 from .pipeline import PrintableJob, RipSettings
 from .profile import Profile, load_profile
 
-PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
+from .settings import TEST_PATTERNS as PATTERNS  # noqa: E402 - light, for the CLI parser
 ALIGN_RANGE = 4          # candidate offsets -4 .. +4 columns
 ALIGN_BLOCK = 48         # columns per candidate block
 ALIGN_PITCH = 8          # columns between bars

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import PX, ROOT, random_planes, write_cmyk_tiff
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import JobError, PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.planes import read_planes

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import PX, random_planes, write_cmyk_tiff
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import JobCancelled, JobError, PrintJob
 from wideprint.driver import protocol as P
 from wideprint.rip.pipeline import RipJob, RipSettings

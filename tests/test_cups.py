@@ -59,7 +59,7 @@ def _free_port() -> int:
 
 @pytest.fixture(scope="module")
 def wideprint_server(tmp_path_factory):
-    from wideprint.driver.server import PrintServer, ServerConfig
+    from wideprint.app.server import PrintServer, ServerConfig
     root = tmp_path_factory.mktemp("wp")
     server = PrintServer(ServerConfig(device="emulator", state_dir=root / "state",
                                       media_dir=root / "media", port=0))

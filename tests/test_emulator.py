@@ -11,7 +11,8 @@ from wideprint.device_sim.endpoints import in_process
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.printer import Printer
 from wideprint.driver import protocol as P
-from wideprint.driver.device import Device, open_device
+from wideprint.app.devices import open_device
+from wideprint.driver.device import Device
 from wideprint.driver.job import JobError, PrintJob
 from wideprint.driver.link import CommandLink, DeviceError
 from wideprint.rip.pipeline import RipJob, RipSettings

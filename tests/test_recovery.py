@@ -6,7 +6,7 @@ import pytest
 
 from conftest import PX, random_planes, write_cmyk_tiff
 from wideprint.device_sim.faults import Faults
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.planes import read_planes

@@ -168,7 +168,7 @@ def test_server_killed_mid_job_resumes_bit_exact(tmp_path, on_crash):
 # -- an in-process server for the API, hot folder and accounting tests --------------------------
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory):
-    from wideprint.driver.server import PrintServer, ServerConfig
+    from wideprint.app.server import PrintServer, ServerConfig
     root = tmp_path_factory.mktemp("server")
     cfg = ServerConfig(device="emulator", state_dir=root / "state", media_dir=root / "media",
                        hot_folder_root=root / "hot", port=0, scan_interval=0.2,
@@ -351,7 +351,7 @@ def test_hold_release_cancel_and_priority(srv, client):
 
 # -- 1,000 concurrent submissions --------------------------------------------------------------
 def test_thousand_concurrent_submissions_accepted_once_in_order(tmp_path):
-    from wideprint.driver.server import PrintServer, ServerConfig
+    from wideprint.app.server import PrintServer, ServerConfig
     server = PrintServer(ServerConfig(device="emulator", state_dir=tmp_path / "state", port=0,
                                       start_paused=True))
     server.start()
@@ -470,7 +470,7 @@ def test_hot_folder_refuses_symlinks_fifos_and_oversize(srv, tmp_path):
 
 # -- accounting ----------------------------------------------------------------------------------
 def test_accounting_csv_columns_and_values(srv, client, tmp_path):
-    from wideprint.driver.server import CSV_COLUMNS
+    from wideprint.app.server import CSV_COLUMNS
     from wideprint.rip.pipeline import RipJob, RipSettings
     planes = random_planes(300, 480, seed=17)
     src = write_cmyk_tiff(tmp_path / "acct.tif", planes)
@@ -649,7 +649,7 @@ def test_requeue_is_refused_with_the_reason(srv, client):
 
 
 def test_spool_copies_of_ended_jobs_expire(tmp_path):
-    from wideprint.driver.server import PrintServer, ServerConfig
+    from wideprint.app.server import PrintServer, ServerConfig
     state = tmp_path / "state"
 
     def server(**kw):
@@ -698,7 +698,7 @@ def test_spool_copies_of_ended_jobs_expire(tmp_path):
 
 
 def test_schema_1_database_gets_the_attempt_columns(tmp_path):
-    from wideprint.driver.spool import SCHEMA, Spool
+    from wideprint.app.server.spool import SCHEMA, Spool
     state = tmp_path / "state"
     state.mkdir()
     import re
@@ -725,7 +725,7 @@ def write_atomic(path, text):
 
 
 def test_presets_reread_when_the_file_changes_and_a_broken_file_is_refused(tmp_path):
-    from wideprint.driver.server import DEFAULT_PRESETS, PrintServer, ServerConfig
+    from wideprint.app.server import DEFAULT_PRESETS, PrintServer, ServerConfig
     state, hot = tmp_path / "state", tmp_path / "hot"
     server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
                                       hot_folder_root=hot, scan_interval=0.1, start_paused=True,
@@ -802,7 +802,7 @@ def client_job_settings(c, job_id):
 
 
 def test_presets_reload_says_what_changed(tmp_path):
-    from wideprint.driver.server import PrintServer, ServerConfig
+    from wideprint.app.server import PrintServer, ServerConfig
     state = tmp_path / "state"
     server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
                                       start_paused=True))      # no hot folders: no scanner

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import PX, random_planes, write_cmyk_tiff
-from wideprint.driver.device import open_device
+from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.testprints import PatternJob, make_pattern

@@ -9,9 +9,9 @@ import os
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-from ...rip.pipeline import RipSettings
+from ...rip.settings import RipSettings
 from ...rip.profile import Profile, load_profile
-from ...rip.swath import PASS_MASKS
+from ...rip.settings import setting
 
 # placement size modes offered by the GUI -> rip.place.Placement fields
 SIZE_MODES = {
@@ -21,22 +21,10 @@ SIZE_MODES = {
     "fit": "Fit to media width",
     "pixels": "1 image pixel = 1 dot",
 }
-ROTATIONS = (0, 90, 180, 270)
-ALIGN_NAMES = {"left": "Left", "center": "Centre", "right": "Right"}
-FILTERS = ("lanczos3", "cubic", "linear", "nearest")
-DITHER_NAMES = {
-    "fs": "Floyd–Steinberg",
-    "jarvis": "Jarvis–Judice–Ninke",
-    "stucki": "Stucki",
-    "bayer": "Bayer 16×16 (ordered)",
-    "bluenoise": "Blue noise (ordered)",
-}
-INTENT_NAMES = {
-    "perceptual": "Perceptual",
-    "relative": "Relative colorimetric",
-    "saturation": "Saturation",
-    "absolute": "Absolute colorimetric",
-}
+# the GUI's names for the schema's choices (rip/settings.py declares them once)
+ALIGN_NAMES = setting("align").labels
+DITHER_NAMES = setting("dither").labels
+INTENT_NAMES = setting("intent").labels
 
 
 @functools.lru_cache(maxsize=16)
@@ -99,25 +87,15 @@ class JobSettings:
 
     def validate(self) -> None:
         """Repair values a hand-edited settings file may hold (keeps the GUI startable)."""
-        from ...rip.halftone import METHODS
-        if self.dpi not in (150, 300, 600):
-            self.dpi = 300
-        if self.passes not in (1, 2, 3, 4, 6, 8):
-            self.passes = 1
-        if self.dither not in METHODS:
-            self.dither = "fs"
-        if self.pass_mask not in PASS_MASKS:
-            self.pass_mask = PASS_MASKS[0]
-        if self.intent not in INTENT_NAMES:
-            self.intent = "relative"
+        # a value the schema refuses goes back to the schema's default
+        for name in ("dpi", "passes", "bidir", "dither", "pass_mask", "intent", "rotate",
+                     "filter", "align"):
+            try:
+                setting(name).check(getattr(self, name))
+            except ValueError:
+                setattr(self, name, setting(name).default)
         if self.size_mode not in SIZE_MODES:
             self.size_mode = "original"
-        if self.rotate not in ROTATIONS:
-            self.rotate = 0
-        if self.filter not in FILTERS:
-            self.filter = "lanczos3"
-        if self.align not in ALIGN_NAMES:
-            self.align = "left"
         for name in ("x_mm", "top_mm", "margin_mm"):
             v = getattr(self, name)
             if v is None and name == "margin_mm":

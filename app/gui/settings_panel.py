@@ -9,16 +9,18 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog
                                QGridLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
                                QSpinBox, QToolButton, QVBoxLayout, QWidget)
 
-from ...rip.halftone import METHODS
-from ...rip.swath import PASS_MASKS
+from ...rip.settings import setting
 from .estimate import Estimate, fmt_duration, fmt_ml
-from .jobsettings import (ALIGN_NAMES, DITHER_NAMES, FILTERS, INTENT_NAMES, ROTATIONS, SIZE_MODES,
-                          JobSettings)
+from .jobsettings import SIZE_MODES, JobSettings, cached_profile
 
-MASK_NAMES = {"checker": "Checkerboard", "random": "Random (blue noise)", "feather": "Feathered edges"}
 
-PASSES = (1, 2, 3, 4, 6, 8)
-DPIS = (150, 300, 600)
+def _fill(combo: QComboBox, name: str) -> None:
+    """A combo box's items: the setting's choices and labels from the settings schema."""
+    s = setting(name)
+    choices = s.choices if s.choices is not None else (False, True)
+    for value in choices:
+        combo.addItem((s.labels or {}).get(value, str(value)), value)
+    combo.setToolTip(s.help[:1].upper() + s.help[1:])
 
 
 class _FileField(QWidget):
@@ -88,30 +90,24 @@ class SettingsPanel(QWidget):
         f.addRow("Printer profile", row)
         self.dpi = QComboBox()
         self.dpi.setObjectName("dpi")
-        for d in DPIS:
-            self.dpi.addItem(f"{d} dpi", d)
+        _fill(self.dpi, "dpi")
+        self.profile.currentIndexChanged.connect(self._profile_changed)
         f.addRow("Resolution", self.dpi)
         self.passes = QComboBox()
         self.passes.setObjectName("passes")
-        for p in PASSES:
-            self.passes.addItem(f"{p} pass" + ("es" if p > 1 else ""), p)
+        _fill(self.passes, "passes")
         f.addRow("Passes", self.passes)
         self.pass_mask = QComboBox()
         self.pass_mask.setObjectName("pass_mask")
-        self.pass_mask.setToolTip("Which pass prints which dot: checkerboard, random (blue noise), "
-                                  "or feathered pass edges")
-        for m in PASS_MASKS:
-            self.pass_mask.addItem(MASK_NAMES.get(m, m), m)
+        _fill(self.pass_mask, "pass_mask")
         f.addRow("Pass mask", self.pass_mask)
         self.direction = QComboBox()
         self.direction.setObjectName("direction")
-        self.direction.addItem("Unidirectional", False)
-        self.direction.addItem("Bidirectional", True)
+        _fill(self.direction, "bidir")
         f.addRow("Direction", self.direction)
         self.dither = QComboBox()
         self.dither.setObjectName("dither")
-        for m in METHODS:
-            self.dither.addItem(DITHER_NAMES.get(m, m), m)
+        _fill(self.dither, "dither")
         f.addRow("Dither", self.dither)
         self.input_icc = _FileField("embedded, else sRGB", "ICC profiles (*.icc *.icm);;All files (*)")
         f.addRow("Input ICC", self.input_icc)
@@ -119,8 +115,7 @@ class SettingsPanel(QWidget):
         f.addRow("Output ICC", self.output_icc)
         self.intent = QComboBox()
         self.intent.setObjectName("intent")
-        for k, v in INTENT_NAMES.items():
-            self.intent.addItem(v, k)
+        _fill(self.intent, "intent")
         f.addRow("Intent", self.intent)
         ink = QHBoxLayout()
         self.ink_on = QCheckBox()
@@ -168,23 +163,20 @@ class SettingsPanel(QWidget):
         pf.addRow("Fit width", self.fit_width)
         self.rotate = QComboBox()
         self.rotate.setObjectName("rotate")
-        for r in ROTATIONS:
-            self.rotate.addItem(f"{r}°", r)
+        _fill(self.rotate, "rotate")
         pf.addRow("Rotate", self.rotate)
         self.mirror = QCheckBox("Mirror (print from the back)")
         self.mirror.setObjectName("mirror")
         pf.addRow("", self.mirror)
         self.filter = QComboBox()
         self.filter.setObjectName("filter")
-        for x in FILTERS:
-            self.filter.addItem(x, x)
+        _fill(self.filter, "filter")
         pf.addRow("Resampling", self.filter)
         # position on the measured paper (applied when the job starts: docs/placement.md)
         pos = QHBoxLayout()
         self.align = QComboBox()
         self.align.setObjectName("align")
-        for k, v in ALIGN_NAMES.items():
-            self.align.addItem(v, k)
+        _fill(self.align, "align")
         self.x_mm = self._mm_spin("x_mm", lo=-10_000)
         self.x_mm.setSpecialValueText("")
         self.x_mm.setPrefix("+ ")
@@ -245,6 +237,19 @@ class SettingsPanel(QWidget):
             self.profile.setCurrentIndex(max(0, i))
         finally:
             self._loading = False
+
+    def _profile_changed(self, *_):
+        """Only the chosen printer profile's dpi modes can be picked."""
+        path = self.profile.currentData()
+        try:
+            modes = cached_profile(path).dpi_modes if path else None
+        except (OSError, ValueError):
+            modes = None
+        model = self.dpi.model()
+        for i in range(self.dpi.count()):
+            item = model.item(i)
+            if item is not None:
+                item.setEnabled(modes is None or self.dpi.itemData(i) in modes)
 
     def _browse_profile(self):
         path, _ = QFileDialog.getOpenFileName(self, "Printer profile", "", "Printer profiles (*.toml)")

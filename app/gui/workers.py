@@ -254,22 +254,20 @@ class PrinterWorker(QObject):
         return self._media_paths.get(job_id)
 
     def _open(self, cfg: DeviceConfig) -> None:
-        from ...driver.device import Device, open_device
-        from ...driver.link import CommandLink
         from ...rip.profile import load_profile
+        from ..devices import open_device
         from .config import builtin_profile_path
         self._close()
         profile = load_profile(cfg.profile_path or None)
         spec = (cfg.spec or "emulator").strip()
         if spec == "emulator":
-            from ...device_sim.endpoints import in_process
-            faults = parse_faults(cfg.faults)
-            machine = load_profile(builtin_profile_path())     # the machine as it is built
-            printer = LivePrinter(machine, faults, media_path=self._media_for)
-            port, data = in_process(printer)
-            dev = Device(CommandLink(InProcessPacedSerial(port, printer, self.pace),
-                                     float(profile.raw["link"]["response_timeout_s"])),
-                         PacedData(data, printer, self.pace), profile, emulator=printer)
+            # the live view's printer, paced to the machine's real speed
+            dev = open_device(spec, profile, parse_faults(cfg.faults), media_path=self._media_for,
+                              machine_profile=load_profile(builtin_profile_path()),
+                              printer_class=LivePrinter,
+                              wrap=lambda port, data, printer: (
+                                  InProcessPacedSerial(port, printer, self.pace),
+                                  PacedData(data, printer, self.pace)))
         else:
             if cfg.faults.strip():
                 raise ValueError("emulator faults only apply to the emulator")

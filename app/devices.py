@@ -1,0 +1,79 @@
+"""Device specs -> devices: the one place that composes printers (docs/driver.md).
+
+    emulator                      the emulator in-process (tests, demos, acceptance runs)
+    emulator-usb                  the same, its data channel through pyusb
+    serial=PORT,data=URL[,baud=N] a real printer or a standalone emulator
+        PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT (pyserial)
+        URL:  usb://VID:PID[/SERIAL]   USB bulk (libusb)
+              /dev/NODE                the PCI card's device node (or a pty stand-in)
+              tcp://HOST:PORT          the standalone emulator's data port
+              usb-emu://HOST:PORT      the standalone emulator as a USB device (pyusb)
+
+The driver (driver/) knows links and printers, never the emulator; the emulator
+(device_sim/) knows only the wire.  Only here do the two meet, for the command line, the
+GUI and the print server alike.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from ..driver.device import Device, Timing, open_link_device, parse_link_spec
+from ..driver.link import CommandLink, LinkError
+from ..driver.transport import TcpData, UsbData
+from ..rip.profile import Profile
+
+EMULATOR_SPECS = ("emulator", "emulator-usb")
+
+
+def is_emulator_spec(spec: str) -> bool:
+    return spec.strip() in EMULATOR_SPECS
+
+
+def open_device(spec: str, profile: Profile, faults=None, media_path=None, event_log=None,
+                machine_profile: Profile | None = None, *,
+                printer_class=None, wrap: Callable | None = None,
+                **emulator_options) -> Device:
+    """Open the device a spec names.
+
+    For the in-process emulator: it is built from `machine_profile` (the machine as it
+    really is; default: the job's profile), `faults`, `media_path` (a path, or a function
+    of the job id), `event_log` and `emulator_options` (vcd_path, vcd_window,
+    record_latched); `printer_class` replaces device_sim's Printer (the GUI's live view)
+    and `wrap(port, data, printer) -> (port, data)` wraps its endpoints (the GUI paces
+    them to the machine's real speed).  The emulator is attached as `device.emulator`."""
+    spec = spec.strip()
+    if spec in EMULATOR_SPECS:
+        from ..device_sim.endpoints import in_process
+        from ..device_sim.printer import Printer
+        printer = (printer_class or Printer)(machine_profile or profile, faults,
+                                             media_path=media_path, event_log=event_log,
+                                             **emulator_options)
+        port, data = in_process(printer)
+        if wrap is not None:
+            port, data = wrap(port, data, printer)
+        if spec == "emulator-usb":
+            from ..device_sim.usb_backend import EmulatorUsbBackend
+            data = UsbData(backend=EmulatorUsbBackend(data))
+        link = CommandLink(port, float(profile.raw["link"]["response_timeout_s"]))
+        return Device(link, data, profile, emulator=printer, timing=Timing.synchronous())
+    parts = parse_link_spec(spec)
+    data = None
+    if parts["data"].startswith("usb-emu://"):
+        # a standalone emulator presenting itself as a USB device: pyusb over its TCP port
+        from ..device_sim.usb_backend import EmulatorUsbBackend
+        host, _, port_no = parts["data"][len("usb-emu://"):].rpartition(":")
+        try:
+            data = UsbData(backend=EmulatorUsbBackend(TcpData(host or "127.0.0.1", int(port_no))))
+        except (OSError, ConnectionError) as exc:
+            raise LinkError(f"cannot open data channel {parts['data']}: {exc}") from None
+    return open_link_device(spec, profile, data=data)
+
+
+def close_device(dev: Device) -> None:
+    """Close a device; an in-process emulator first finishes its outputs (media, logs)."""
+    try:
+        if dev.emulator is not None:
+            dev.emulator.close()
+    finally:
+        dev.close()

@@ -1,0 +1,44 @@
+"""Accounting: one row per printed copy, as CSV (docs/server.md, "Accounting")."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import time
+
+from .spool import COLORS
+
+log = logging.getLogger("wideprint.server")
+
+
+CSV_COLUMNS = ["print_id", "job_id", "copy", "file", "source", "preset", "settings", "dpi",
+               "passes_mode", "bidir", "dither", "started", "ended", "duration_s",
+               "passes_total", "passes_printed", "width_dots", "height_rows", "area_m2",
+               "drops_c", "drops_m", "drops_y", "drops_k",
+               "ink_c_ml", "ink_m_ml", "ink_y_ml", "ink_k_ml", "ink_total_ml",
+               "outcome", "message", "resumed", "recoveries", "retries", "attempt"]
+
+
+def _iso(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(t)) + f".{int(t % 1 * 1000):03d}Z"
+
+
+def prints_csv(rows: list[dict]) -> str:
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(CSV_COLUMNS)
+    for r in rows:
+        s = json.loads(r["settings"])
+        ink = [r[f"ink_{c}_ml"] for c in COLORS]
+        w.writerow([r["id"], r["job_id"], r["copy"], r["file"], r["source"], r["preset"] or "",
+                    r["settings"], s.get("dpi", 300), s.get("passes", 1),
+                    int(bool(s.get("bidir", False))), s.get("dither", "fs"),
+                    _iso(r["started"]), _iso(r["ended"]), f"{r['duration_s']:.3f}",
+                    r["passes_total"], r["passes_printed"], r["width_dots"], r["height_rows"],
+                    f"{r['area_m2']:.10f}", *(r[f"drops_{c}"] for c in COLORS),
+                    *(f"{v:.9f}" for v in ink), f"{sum(ink):.9f}",
+                    r["outcome"], r["message"], r["resumed"], r["recoveries"], r["retries"],
+                    r["attempt"]])
+    return out.getvalue()

@@ -1,0 +1,92 @@
+"""The print server's configuration, state directory, token and file-system helpers
+(docs/server.md)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+from dataclasses import dataclass, field
+from pathlib import Path
+
+log = logging.getLogger("wideprint.server")
+
+
+DEFAULT_PORT = 8631
+DEFAULT_MAX_FILE = 4 * 1024 ** 3          # 4 GiB
+TOKEN_FILE = "token"
+SERVER_FILE = "server.json"
+PRESET_FILES = ("presets.toml", "presets.json")
+IMAGE_SUFFIXES = (".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".png")
+IGNORED_SUFFIXES = (".part", ".tmp", ".temp", ".crdownload", ".partial", ".download", "~",
+                    ".swp", ".reason.txt")
+MAX_COPIES = 100
+PRIORITY_RANGE = (-100, 100)
+CHUNK = 1 << 20
+
+
+def default_state_dir() -> Path:
+    """WIDEPRINT_STATE_DIR, else /var/lib/wideprint for root, else the user's state dir."""
+    env = os.environ.get("WIDEPRINT_STATE_DIR")
+    if env:
+        return Path(env)
+    if os.geteuid() == 0:
+        return Path("/var/lib/wideprint")
+    try:
+        from platformdirs import user_state_dir
+        return Path(user_state_dir("wideprint"))
+    except ImportError:
+        return Path.home() / ".local" / "state" / "wideprint"
+
+
+def ensure_token(state_dir: Path) -> str:
+    """The API token: created 0600 on first start, read by clients."""
+    path = state_dir / TOKEN_FILE
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return path.read_text().strip()
+    token = secrets.token_urlsafe(32)
+    with os.fdopen(fd, "w") as f:
+        f.write(token + "\n")
+    return token
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _unique(path: Path) -> Path:
+    if not path.exists() and not path.is_symlink():
+        return path
+    stem, suffix = path.name, ""
+    for s in IMAGE_SUFFIXES:
+        if path.name.lower().endswith(s):
+            stem, suffix = path.name[:-len(s)], path.name[-len(s):]
+    i = 1
+    while True:
+        cand = path.with_name(f"{stem}-{i}{suffix}")
+        if not cand.exists() and not cand.is_symlink():
+            return cand
+        i += 1
+
+
+@dataclass
+class ServerConfig:
+    device: str = "emulator"
+    state_dir: Path = field(default_factory=default_state_dir)
+    media_dir: Path | None = None
+    hot_folder_root: Path | None = None
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_PORT
+    on_crash: str = "resume"               # resume | hold
+    max_file_bytes: int = DEFAULT_MAX_FILE
+    scan_interval: float = 1.0
+    start_paused: bool = False
+    profile_path: str | None = None
+    reconnect_backoff: tuple = (0.5, 30.0)
+    keep_failed_s: float = 7 * 86400       # spool copies of failed/cancelled jobs (requeue)

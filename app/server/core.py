@@ -1,0 +1,307 @@
+"""`wideprint serve`: the print server (docs/server.md).
+
+One process owns the printer (one Device, re-opened after link errors) and its queue
+(spool.py).  Threads:
+
+- the API: HTTP/JSON on 127.0.0.1 with a bearer token (`ApiHandler`);
+- the worker: prints queued jobs one at a time in queue order, persisting the job's
+  checkpoint after every pass, so a server killed mid-job resumes it at its first
+  unfinished pass (or holds it, `--on-crash hold`);
+- the hot-folder scanner: one folder per preset; a completely written file becomes a job,
+  and moves to done/ or failed/ (with NAME.reason.txt) when the job ends.
+
+The presets (`Presets`) are re-read when their file changes, without a restart; a broken
+file keeps the presets in use.
+
+Nothing here trusts its inputs: names, JSON, sizes and file types are checked (see
+`validate_*`, `HotFolders`), and a file that cannot be ripped fails its own job only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import signal
+import threading
+import time
+import uuid
+from pathlib import Path
+
+from .accounting import prints_csv
+from .api import ApiHandler, _HTTPServer
+from .config import CHUNK, IMAGE_SUFFIXES, SERVER_FILE, ServerConfig, _fsync_dir, ensure_token
+from .hotfolders import HotFolders
+from .presets import Presets
+from .spool import Spool
+from .validate import Invalid
+from .worker import Worker
+
+log = logging.getLogger("wideprint.server")
+
+
+# -- the server ---------------------------------------------------------------------------------
+class PrintServer:
+    def __init__(self, config: ServerConfig):
+        from ...rip.profile import load_profile
+        self.config = config
+        self.state_dir = Path(config.state_dir)
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        os.chmod(self.state_dir, 0o700) if self.state_dir.stat().st_uid == os.geteuid() else None
+        (self.state_dir / "icc").mkdir(exist_ok=True)
+        if config.media_dir:
+            Path(config.media_dir).mkdir(parents=True, exist_ok=True)
+        self.profile = load_profile(config.profile_path)
+        self.preset_source = Presets(self.state_dir, self.profile)
+        self.token = ensure_token(self.state_dir)
+        self.spool = Spool(self.state_dir)
+        self.started = time.time()
+        self.recovered = self.spool.recover(config.on_crash)
+        for job in self.recovered:
+            log.warning("job %s: %s", job["id"], job["message"])
+        self._clean_spool()
+        self.expire_spool()
+        self.worker = Worker(self)
+        self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
+        handler = type("Handler", (ApiHandler,), {"srv": self})
+        if config.host not in ("127.0.0.1", "localhost", "::1"):
+            log.warning("the API listens on %s, beyond this machine: anyone with the token "
+                        "can print", config.host)
+        self.http = _HTTPServer((config.host, config.port), handler)
+        self.port = self.http.server_address[1]
+        self.url = f"http://{config.host}:{self.port}"
+        self._http_thread = threading.Thread(target=self.http.serve_forever, name="wideprint-api",
+                                             daemon=True)
+        self._stopped = threading.Event()
+
+    def _clean_spool(self) -> None:
+        """Private copies nobody references (a crash between copy and commit) go."""
+        used = self.spool.spool_files_in_use()
+        for p in self.spool.spool_dir.iterdir():
+            if str(p) not in used:
+                try:
+                    p.unlink()
+                except OSError:
+                    pass
+
+    def expire_spool(self) -> None:
+        """Spool copies of failed and cancelled jobs older than --keep-failed go (those
+        jobs can no longer be requeued)."""
+        for path in self.spool.expire_copies(time.time() - self.config.keep_failed_s):
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+
+    def keeps_copy(self, state: str) -> bool:
+        """Whether a job ending in `state` keeps its spool copy: failed and cancelled jobs
+        do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0."""
+        return state in ("failed", "cancelled") and self.config.keep_failed_s > 0
+
+    @property
+    def presets(self) -> dict:
+        """The presets now (re-read first when their file changed)."""
+        return self.preset_source.get()
+
+    def reload_presets(self) -> dict:
+        """Re-read the presets file (API `POST /v1/presets/reload`): the presets, what
+        changed, and the hot folders of new presets made at once.  A broken file raises
+        Invalid naming the file and the problem; the presets in use stay."""
+        try:
+            diff = self.preset_source.reload()
+        except ValueError as exc:
+            raise Invalid(str(exc)) from None
+        presets = self.preset_source.current
+        if self.hot:
+            with self.hot.lock:
+                self.hot.make_folders(presets)
+        return dict(self.preset_source.info(), presets=presets, **diff)
+
+    def start(self) -> None:
+        self.worker.start()
+        self._http_thread.start()
+        if self.hot:
+            self.hot.start()
+        info = dict(url=self.url, pid=os.getpid(), started=self.started,
+                    device=self.config.device, state_dir=str(self.state_dir))
+        tmp = self.state_dir / (SERVER_FILE + ".tmp")
+        tmp.write_text(json.dumps(info) + "\n")
+        os.replace(tmp, self.state_dir / SERVER_FILE)
+
+    def stop(self, timeout: float = 30.0) -> None:
+        if self._stopped.is_set():
+            return
+        self._stopped.set()
+        if self.hot:
+            self.hot.stopping.set()
+        self.worker.interrupt(timeout)
+        self.http.shutdown()
+        self.http.server_close()
+        try:
+            (self.state_dir / SERVER_FILE).unlink()
+        except OSError:
+            pass
+
+    # -- intake -------------------------------------------------------------------------------
+    def spool_copy(self, src, name: str, size: int, exact: bool = False) -> tuple[str, int, str]:
+        """Copy a submitted file into the spool (fsync'd): returns (path, size, sha256).
+        exact: read exactly `size` bytes (an upload); otherwise to EOF, refusing more than
+        the size limit."""
+        suffix = Path(name).suffix.lower()
+        suffix = suffix if suffix in IMAGE_SUFFIXES else ""
+        final = self.spool.spool_dir / f"{uuid.uuid4().hex}{suffix}"
+        tmp = self.spool.spool_dir / f".{final.name}.part"
+        h = hashlib.sha256()
+        n = 0
+        limit = self.config.max_file_bytes
+        try:
+            with open(tmp, "wb") as out:
+                while True:
+                    want = min(CHUNK, size - n) if exact else CHUNK
+                    if exact and want <= 0:
+                        break
+                    buf = src.read(want)
+                    if not buf:
+                        break
+                    n += len(buf)
+                    if n > limit:
+                        raise Invalid(f"{name} is more than {limit} bytes, the limit", 413)
+                    h.update(buf)
+                    out.write(buf)
+                if exact and n != size:
+                    raise Invalid(f"upload ended after {n} of {size} bytes")
+                out.flush()
+                os.fsync(out.fileno())
+            os.rename(tmp, final)
+            _fsync_dir(self.spool.spool_dir)
+        except BaseException:
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+            raise
+        return str(final), n, h.hexdigest()
+
+    # -- operations (API) -----------------------------------------------------------------------
+    def public(self, job: dict, positions: dict | None = None) -> dict:
+        d = {k: v for k, v in job.items() if k not in ("spool_path", "checkpoint", "key")}
+        cp = job.get("checkpoint")
+        d["next_pass"] = cp.get("next_pass") if cp else None
+        if positions is not None:
+            d["position"] = positions.get(job["id"])
+        return d
+
+    def jobs(self, states=None, limit=None, after=0) -> list[dict]:
+        pos = self.spool.queue_position()
+        return [self.public(j, pos) for j in self.spool.jobs(states, limit, after)]
+
+    def cancel(self, job_id: int) -> dict:
+        before = self.spool.get(job_id)
+        keep = self.keeps_copy("cancelled")
+        job = self.spool.cancel_waiting(job_id, keep_copy=keep)
+        if job is None:                                # printing: stop it at the printer
+            if not self.worker.cancel(job_id):
+                # claimed but not started yet, or between copies: the worker checks this set
+                self.worker._cancel.add(job_id)
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                job = self.spool.get(job_id)
+                if job["state"] != "printing":
+                    break
+                time.sleep(0.05)
+            return job
+        self.hot_done(job, "cancelled", "cancelled by the operator")
+        if before and before.get("spool_path") and not keep:
+            try:
+                os.unlink(before["spool_path"])
+            except OSError:
+                pass
+        self.worker.notify()
+        return job
+
+    def hold(self, job_id: int) -> dict:
+        return self.spool.hold(job_id)
+
+    def release(self, job_id: int) -> dict:
+        job = self.spool.release(job_id)
+        self.worker.notify()
+        return job
+
+    def requeue(self, job_id: int) -> dict:
+        """A failed or cancelled job back in the queue, to print afresh (docs/server.md,
+        "Requeue"); refused, with the reason, for other states or a spool copy gone."""
+        before = self.spool.get(job_id)
+        if before is not None and before["state"] in ("failed", "cancelled"):
+            self.worker.forget_cancel(job_id)      # a late cancel of the ended attempt
+        job = self.spool.requeue(job_id)
+        log.info("job %s requeued (attempt %s)", job_id, job["attempt"])
+        self.worker.notify()
+        return job
+
+    def hot_done(self, job: dict, state: str, message: str) -> None:
+        """A hot-folder job ended: its original goes to done/ or failed/ (with reason)."""
+        hot = job.get("hot_path")
+        if not hot or not self.hot:
+            return
+        src = Path(hot)
+        if not src.exists():
+            return
+        with self.hot.lock:
+            if state == "done":
+                HotFolders.move(src, src.parent / "done")
+            else:
+                HotFolders.move(src, src.parent / "failed", f"job {job['id']} {state}: {message}")
+
+    def status(self) -> dict:
+        w = self.worker
+        self.preset_source.get()                     # the status reports the file as it is now
+        cur = dict(w.current) if w.current else None
+        if cur is not None and w.job is not None:
+            t = w.job.telemetry
+            cur["telemetry"] = dict(carriage_counts=t.carriage_counts, paper_steps=t.paper_steps,
+                                    fires_done=t.fires_done, head_temps_c=list(t.head_temps_c),
+                                    fault=t.fault, retries=t.retries)
+        return dict(server=dict(version=_version(), pid=os.getpid(), url=self.url,
+                                started=self.started, device=self.config.device,
+                                on_crash=self.config.on_crash,
+                                hot_folder_root=str(self.config.hot_folder_root or "") or None),
+                    queue=dict(paused=w.paused, reason=w.pause_reason, counts=self.spool.counts()),
+                    presets=self.preset_source.info(),
+                    printer=dict(state=w.printer_state, error=w.printer_error),
+                    current=cur)
+
+    def report_csv(self, job_id: int | None = None) -> str:
+        return prints_csv(self.spool.prints(job_id))
+
+
+def _version() -> str:
+    try:
+        from ... import __version__
+        return __version__
+    except ImportError:
+        return "?"
+
+
+def serve(config: ServerConfig, ready=None) -> int:
+    """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next pass
+    boundary and resumed by the next start."""
+    server = PrintServer(config)
+    server.start()
+    done = threading.Event()
+
+    def on_signal(signum, frame):
+        done.set()
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    print(f"wideprint serve: {server.url} (state {server.state_dir}, device {config.device}"
+          + (f", hot folders {config.hot_folder_root}" if config.hot_folder_root else "")
+          + ")", flush=True)
+    for job in server.recovered:
+        print(f"wideprint serve: job {job['id']}: {job['message']}", flush=True)
+    if ready:
+        ready(server)
+    while not done.wait(1.0):
+        pass
+    server.stop()
+    return 0

@@ -1,0 +1,287 @@
+"""The print worker: prints queued jobs one at a time on the server's printer, persisting
+each job's checkpoint after every pass (docs/server.md, "The worker")."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import struct
+import threading
+import time
+from typing import TYPE_CHECKING
+
+from .spool import COLORS
+from .validate import rip_settings
+
+if TYPE_CHECKING:
+    from .core import PrintServer
+
+log = logging.getLogger("wideprint.server")
+
+
+# -- the worker -------------------------------------------------------------------------------
+class Worker(threading.Thread):
+    """Prints queued jobs one at a time, in queue order."""
+
+    def __init__(self, server: "PrintServer"):
+        super().__init__(name="wideprint-worker", daemon=True)
+        self.srv = server
+        self.spool = server.spool
+        self.wake = threading.Condition()
+        self.paused = server.config.start_paused
+        self.pause_reason = "started paused" if self.paused else ""
+        self.stopping = False
+        self.dev = None
+        self.printer_state = "idle"        # idle, printing, offline
+        self.printer_error = ""
+        self.current: dict | None = None   # id, name, copy, state, detail, pass, ...
+        self.job = None                    # the PrintJob now running
+        self._cancel: set[int] = set()
+        self._backoff = server.config.reconnect_backoff[0]
+        self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
+
+    # control from other threads
+    def notify(self) -> None:
+        with self.wake:
+            self.wake.notify_all()
+
+    def set_paused(self, paused: bool, reason: str = "") -> None:
+        self.paused = paused
+        self.pause_reason = reason if paused else ""
+        self.notify()
+
+    def cancel(self, job_id: int) -> bool:
+        cur = self.current
+        if cur is None or cur["id"] != job_id:
+            return False
+        self._cancel.add(job_id)
+        job = self.job
+        if job is not None:
+            job.control.cancel()
+        return True
+
+    def forget_cancel(self, job_id: int) -> None:
+        """A requeued job: a cancel meant for its earlier attempt must not stop this one."""
+        self._cancel.discard(job_id)
+
+    def interrupt(self, timeout: float) -> None:
+        """Server shutdown: the running job pauses at its next pass boundary (its
+        checkpoint is saved), so a restart resumes it; the worker takes nothing new."""
+        self.stopping = True
+        self.notify()
+        job = self.job
+        if job is None:
+            return
+        job.control.pause()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and self.job is job and job.telemetry.state != "paused":
+            time.sleep(0.05)
+
+    # the loop
+    def run(self) -> None:
+        while not self.stopping:
+            if time.monotonic() >= self._next_expiry:
+                self._next_expiry = time.monotonic() + 60
+                try:
+                    self.srv.expire_spool()
+                except Exception:  # noqa: BLE001 - housekeeping must not end the worker
+                    log.exception("expiring spool copies")
+            job = None
+            if not self.paused:
+                try:
+                    job = self.spool.next_job()
+                except Exception:  # noqa: BLE001 - a database hiccup must not end the worker
+                    log.exception("reading the queue")
+            if job is None:
+                with self.wake:
+                    self.wake.wait(0.5)
+                continue
+            try:
+                self._run_job(job["id"])
+            except Exception as exc:  # noqa: BLE001 - never let one job end the server
+                log.exception("job %s", job["id"])
+                try:
+                    self._finish(self.spool.get(job["id"]), "failed", f"internal error: {exc}")
+                except Exception:  # noqa: BLE001
+                    log.exception("failing job %s", job["id"])
+            finally:
+                self.current, self.job = None, None
+                if self.printer_state == "printing":
+                    self.printer_state = "idle"
+
+    def _device(self):
+        if self.dev is None:
+            from ..devices import open_device
+            media = self.srv.config.media_dir
+            media_path = (lambda job: str(media / f"job-{job}.tif")) if media else None
+            self.dev = open_device(self.srv.config.device, self.srv.profile, media_path=media_path)
+        return self.dev
+
+    def _drop_device(self) -> None:
+        dev, self.dev = self.dev, None
+        if dev is not None and dev.emulator is None:     # an in-process emulator keeps its state
+            try:
+                dev.close()
+            except Exception:  # noqa: BLE001
+                pass
+        elif dev is not None:
+            self.dev = dev
+
+    def _offline(self, job_id: int, message: str) -> None:
+        self.printer_state, self.printer_error = "offline", message
+        self.spool.wait_for_printer(job_id, f"waiting for the printer: {message}")
+        log.warning("printer offline: %s (retrying in %.1f s)", message, self._backoff)
+        with self.wake:
+            self.wake.wait(self._backoff)
+        self._backoff = min(self._backoff * 2, self.srv.config.reconnect_backoff[1])
+
+    def _run_job(self, job_id: int) -> None:
+        from ...rip.load import ImageError
+        from ...rip.pipeline import RipJob
+        from ...driver.job import JobCancelled, JobError, PrintJob
+        from ...driver.link import DeviceError, LinkError
+        from ...driver.stream import StreamError
+
+        job = self.spool.claim(job_id)
+        if job is None:
+            return
+        resumed = job["checkpoint"] is not None
+        self.current = dict(id=job_id, name=job["name"], copy=job["copies_done"] + 1,
+                            copies=job["copies"], state="ripping", detail="", pass_index=None,
+                            passes_total=job["passes_total"], passes_printed=job["passes_done"],
+                            resumed=resumed)
+        self.printer_state = "printing"
+        settings = dict(job["settings"])
+        icc = self.srv.state_dir / "icc"
+        for k in ("input_icc", "output_icc"):
+            if settings.get(k):
+                settings[k] = str(icc / settings[k])
+        first = True
+        while job["copies_done"] < job["copies"]:
+            copy = job["copies_done"] + 1
+            if not first:
+                self.spool.start_copy(job_id)
+                job = self.spool.get(job_id)
+                resumed = False
+            self.current.update(copy=copy, state="ripping", pass_index=None, passes_printed=0)
+            cp = job["checkpoint"] if first else None
+            first = False
+            started = job["copy_started"] or time.time()
+            if job_id in self._cancel:
+                self._account(job, copy, started, None, "cancelled", "cancelled by the operator",
+                              resumed)
+                self._finish(job, "cancelled", "cancelled by the operator")
+                return
+            try:
+                rip = RipJob(job["spool_path"], rip_settings(settings), self.srv.profile)
+            except (ImageError, ValueError, OSError) as exc:
+                msg = str(exc).replace(job["spool_path"] or "", job["name"])
+                self._account(job, copy, started, None, "failed", msg, resumed)
+                self._finish(job, "failed", msg)
+                return
+            try:
+                try:
+                    dev = self._device()
+                    if cp is None and copy == 1 and job["attempt"] > 1:
+                        self._close_earlier_attempt(dev, job_id)
+                except (LinkError, OSError, ValueError) as exc:
+                    self._offline(job_id, str(exc))
+                    return
+                except DeviceError as exc:
+                    msg = f"ending the earlier attempt on the printer: {exc}"
+                    self._account(job, copy, started, None, "failed", msg, resumed)
+                    self._finish(job, "failed", msg)
+                    return
+                epoch = job.get("epoch") or self.spool.epoch()
+
+                def on_event(kind, **kw):
+                    cur = self.current
+                    if kind == "checkpoint":
+                        self.spool.save_checkpoint(job_id, dict(kw["checkpoint"], epoch=epoch,
+                                                                copy=copy),
+                                                   pj.report.passes_total)
+                        cur["passes_printed"] = kw["checkpoint"].get("next_pass", 0)
+                        cur["passes_total"] = pj.report.passes_total
+                    elif kind == "state":
+                        cur["state"], cur["detail"] = kw["state"], kw.get("detail", "")
+                    elif kind == "pass":
+                        cur["pass_index"], cur["passes_total"] = kw["index"], kw["total"]
+
+                pj = PrintJob(dev, rip, job_id=job_id, on_event=on_event, resume=cp)
+                self.job = pj
+                if job_id in self._cancel:
+                    pj.control.cancel()
+                if self.stopping:
+                    pj.control.pause()
+                try:
+                    rep = pj.run()
+                except JobCancelled as exc:
+                    self._account(job, copy, started, pj.report, "cancelled", str(exc), resumed)
+                    self._finish(job, "cancelled", f"cancelled by the operator ({exc})")
+                    return
+                except JobError as exc:
+                    cause = exc.__cause__
+                    if isinstance(cause, (LinkError, StreamError)) and not self.stopping:
+                        self._drop_device()
+                        self._offline(job_id, str(exc))
+                        return
+                    self._account(job, copy, started, pj.report, "failed", str(exc), resumed)
+                    self._finish(job, "failed", str(exc))
+                    if exc.fault:
+                        self.set_paused(True, f"printer fault: {exc}; clear it and resume the queue")
+                    return
+                finally:
+                    self.job = None
+            finally:
+                rip.close()
+            self.printer_state, self.printer_error = "printing", ""
+            self._backoff = self.srv.config.reconnect_backoff[0]
+            self._account(job, copy, started, rep, "done", "", resumed)
+            job = self.spool.copy_done(job_id)
+        self._finish(job, "done", "")
+
+    @staticmethod
+    def _close_earlier_attempt(dev, job_id: int) -> None:
+        """A requeued job prints afresh under the same printer job id.  Its earlier attempt
+        failed or was cancelled without JOB_END, so the printer may still hold it open, and
+        would take the new JOB_BEGIN (same id, same image area) for the host reconnecting:
+        keep the old placement's media and paper position.  End it first (docs/server.md,
+        "Requeue")."""
+        from ...driver import protocol as P
+        dev.connect()
+        if dev.link.status().flags & P.FLAG_JOB_OPEN:
+            dev.link.command(P.Op.JOB_END, struct.pack("<I", job_id))
+
+    def _finish(self, job: dict, state: str, message: str) -> None:
+        self.srv.hot_done(job, state, message)
+        keep = self.srv.keeps_copy(state)
+        self.spool.finish(job["id"], state, message, keep_copy=keep)
+        self._cancel.discard(job["id"])
+        path = job.get("spool_path")
+        if path and not keep:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+        log.info("job %s %s %s", job["id"], state, message)
+
+    def _account(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
+                 resumed: bool) -> None:
+        prof = self.srv.profile
+        ended = time.time()
+        r = rep.as_dict() if rep is not None else {}
+        drops = [int(d) for d in r.get("drops", [0, 0, 0, 0])]
+        pl = prof.drop_volume_pl
+        row = dict(job_id=job["id"], copy=copy, file=job["name"], source=job["source"],
+                   preset=job["preset"], settings=json.dumps(job["settings"], sort_keys=True),
+                   started=started, ended=ended, duration_s=round(ended - started, 3),
+                   passes_total=r.get("passes_total", 0), passes_printed=r.get("passes_printed", 0),
+                   width_dots=r.get("width_dots", 0), height_rows=r.get("height_rows", 0),
+                   area_m2=r.get("area_m2", 0.0), outcome=outcome, message=message,
+                   resumed=int(bool(resumed)), recoveries=r.get("recoveries", 0),
+                   retries=r.get("retries", 0), attempt=job["attempt"])
+        for c, d in zip(COLORS, drops):
+            row[f"drops_{c}"] = d
+            row[f"ink_{c}_ml"] = round(d * pl * 1e-9, 12)
+        self.spool.add_print(row)
