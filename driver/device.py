@@ -85,7 +85,7 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None,
     is; default: the job's profile) and emulator_options (vcd_path, vcd_window,
     record_latched)."""
     spec = spec.strip()
-    timeout = float(profile.raw["link"]["response_timeout_s"])
+    timeout = profile.link.response_timeout_s
     if spec in ("emulator", "emulator-usb"):
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer
@@ -100,7 +100,7 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None,
     if "serial" not in parts or "data" not in parts:
         raise ValueError(f"device spec {spec!r}: use 'emulator' or 'serial=PORT,data=URL'")
     import serial  # pyserial
-    baud = int(parts.get("baud", profile.raw["link"]["baud"]))
+    baud = int(parts.get("baud", profile.link.baud))
     try:
         port = serial.serial_for_url(parts["serial"], baudrate=baud, timeout=0.02)
     except (serial.SerialException, ValueError) as exc:

@@ -268,7 +268,7 @@ class PrinterWorker(QObject):
             printer = LivePrinter(machine, faults, media_path=self._media_for)
             port, data = in_process(printer)
             dev = Device(CommandLink(InProcessPacedSerial(port, printer, self.pace),
-                                     float(profile.raw["link"]["response_timeout_s"])),
+                                     profile.link.response_timeout_s),
                          PacedData(data, printer, self.pace), profile, emulator=printer)
         else:
             if cfg.faults.strip():
