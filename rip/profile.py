@@ -627,6 +627,8 @@ def _read_section(name: str, cls, doc: dict, ctx: _Ctx):
 
 @dataclass(frozen=True, kw_only=True)
 class Profile:
+    """A loaded profile: its sections as typed attributes, the flat names most code uses,
+    and the device grid derived from them."""
     path: str
     printer: PrinterSection
     encoder: EncoderSection
