@@ -55,7 +55,7 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None, event
         if spec == "emulator-usb":
             from ..device_sim.usb_backend import EmulatorUsbBackend
             data = UsbData(backend=EmulatorUsbBackend(data))
-        link = CommandLink(port, float(profile.raw["link"]["response_timeout_s"]))
+        link = CommandLink(port, profile.link.response_timeout_s)
         return Device(link, data, profile, emulator=printer, timing=Timing.synchronous())
     parts = parse_link_spec(spec)
     data = None

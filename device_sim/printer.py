@@ -48,10 +48,10 @@ class Printer:
         self.n_heads = len(prof.heads)
         self.fpga = Fpga(self.n_heads, self.faults.fifo_words or prof.fifo_words,
                          prof.pass_buffer_words, prof.ring_blocks,
-                         int(prof.raw["fpga"].get("almost_empty_words", 64)),
+                         prof.fpga.almost_empty_words,
                          prof.block_fires * P.WORDS_PER_FIRE)
-        self.heads = [Head(h.index, h.name, temperature_c=float(prof.raw["head"]["nominal_temp_c"]),
-                           overtemp_c=float(prof.raw["head"]["overtemp_c"])) for h in prof.heads]
+        self.heads = [Head(h.index, h.name, temperature_c=prof.head.nominal_temp_c,
+                           overtemp_c=prof.head.overtemp_c) for h in prof.heads]
         for name, nozzle in self.faults.dead_nozzle:
             self.heads[self.head_index(name)].dead.add(nozzle)
         self.dsp = Dsp(self)
@@ -72,7 +72,7 @@ class Printer:
         self.feed_state = 1                  # L297 translator state (1..8)
         self.vcd_feed = True
         self.paper_measured = False
-        width = self.faults.paper_width_mm or float(prof.raw["paper"]["default_width_mm"])
+        width = self.faults.paper_width_mm or prof.paper.default_width_mm
         left = SHEET_LEFT_MM / 25.4 * prof.counts_per_inch
         self.sheet = (left, left + width / 25.4 * prof.counts_per_inch)
         self.paper_edges = (0, 0)
@@ -81,7 +81,7 @@ class Printer:
         self.line_cfg: dict | None = None
         self.line: LineRun | None = None
         self.link_alive = True
-        self.starve_guard = bool(prof.raw["fpga"].get("starve_guard", True)) \
+        self.starve_guard = prof.fpga.starve_guard \
             if self.faults.starve_guard is None else bool(self.faults.starve_guard)
         self.block_decoder = P.BlockDecoder()
         self._data_out = bytearray()
@@ -304,7 +304,7 @@ class Printer:
 
     def _move_to(self, target: float, speed: float | None = None) -> None:
         prof = self.profile
-        v = speed or self._mm_s(float(prof.raw["carriage"]["max_speed_mm_s"]))
+        v = speed or self._mm_s(prof.carriage.max_speed_mm_s)
         move = Trapezoid(self.position, target, v, prof.accel_counts_s2())
         self.time += move.duration
         self.position = float(target)
@@ -325,7 +325,7 @@ class Printer:
         self.log("paper_measured", left=self.paper_edges[0], right=self.paper_edges[1])
 
     def park(self) -> P.Result:
-        self._move_to(float(self.profile.raw["carriage"]["park_counts"]) + self.count_offset)
+        self._move_to(float(self.profile.carriage.park_counts) + self.count_offset)
         return P.Result.OK
 
     def feed(self, steps: int, profile: int, vmax: int, acc: int) -> P.Result:

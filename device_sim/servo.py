@@ -141,23 +141,16 @@ class ServoParams:
 
     @classmethod
     def from_profile(cls, profile, period_s: float | None = None) -> "ServoParams":
-        """Plant from profile.raw["carriage"], counts/inch from the profile, the loop tuned for
+        """Plant from the profile's [carriage], counts/inch from the profile, the loop tuned for
         period_s (default: the profile's servo_period_s)."""
-        c = profile.raw["carriage"]
+        c = profile.carriage
         base = cls(
-            ke=float(c.get("motor_ke", 0.0287)),
-            kt=float(c.get("motor_kt", c.get("motor_ke", 0.0287))),
-            r_ohm=float(c.get("motor_r_ohm", 1.89)), l_h=float(c.get("motor_l_h", 0.00156)),
-            j_kg_m2=float(c.get("inertia_kg_m2", 1e-4)),
-            friction_nm=float(c.get("friction_nm", 0.0)),
-            supply_v=float(c.get("supply_v", 19.1)),
-            current_limit_a=float(c.get("current_limit_a", 2.0)),
-            pulley_diameter_mm=float(c.get("pulley_diameter_mm", 10.0)),
-            counts_per_inch=int(profile.counts_per_inch),
-            ti_s=float(c.get("ti_s", SEED_TI_S)),
+            ke=c.motor_ke, kt=c.torque_constant, r_ohm=c.motor_r_ohm, l_h=c.motor_l_h,
+            j_kg_m2=c.inertia_kg_m2, friction_nm=c.friction_nm, supply_v=c.supply_v,
+            current_limit_a=c.current_limit_a, pulley_diameter_mm=c.pulley_diameter_mm,
+            counts_per_inch=int(profile.counts_per_inch), ti_s=c.ti_s,
         )
-        T = float(period_s if period_s is not None
-                  else c.get("servo_period_s", PRODUCTION_PERIOD_S))
+        T = float(period_s if period_s is not None else c.servo_period_s)
         return base.with_period(T)
 
     @classmethod

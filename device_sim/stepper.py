@@ -483,6 +483,5 @@ def feed_move(steps: int, profile: str = "trapezoid", max_steps_s: float = 4000.
 
 def feed_move_from_profile(profile, steps: int, **kw) -> FeedResult:
     """feed_move with the profile's [feed] speed, acceleration and profile name."""
-    f = profile.raw["feed"]
-    return feed_move(steps, kw.pop("profile", f.get("profile", "trapezoid")),
-                     float(f["max_steps_s"]), float(f["accel_steps_s2"]), **kw)
+    f = profile.feed
+    return feed_move(steps, kw.pop("profile", f.profile), f.max_steps_s, f.accel_steps_s2, **kw)

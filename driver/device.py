@@ -103,7 +103,7 @@ def open_serial(port: str, profile: Profile, baud: int | None = None):
     """The command channel's serial port (pyserial: a tty, a pty or socket://HOST:PORT)."""
     import serial  # pyserial
     try:
-        return serial.serial_for_url(port, baudrate=int(baud or profile.raw["link"]["baud"]),
+        return serial.serial_for_url(port, baudrate=int(baud or profile.link.baud),
                                      timeout=0.02)
     except (serial.SerialException, ValueError) as exc:
         raise LinkError(f"cannot open {port}: {exc}") from None
@@ -120,4 +120,4 @@ def open_link_device(spec: str, profile: Profile, data=None) -> Device:
     except Exception:
         port.close()
         raise
-    return Device(CommandLink(port, float(profile.raw["link"]["response_timeout_s"])), data, profile)
+    return Device(CommandLink(port, profile.link.response_timeout_s), data, profile)

@@ -225,7 +225,7 @@ class PrintJob:
         cpi = prof.counts_per_inch
         k = prof.k(self.rip.settings.dpi)
         kmax = max(prof.k(d) for d in prof.dpi_modes)   # x0 on every dpi mode's column grid
-        margin_mm = float(prof.raw["paper"]["margin_mm"] if pl.margin_mm is None else pl.margin_mm)
+        margin_mm = float(prof.paper.margin_mm if pl.margin_mm is None else pl.margin_mm)
         margin = int(round(margin_mm / 25.4 * cpi))
         lo, hi = left + margin, right - margin           # the printable span, counts
         width_counts = self.rip.width * k
@@ -265,10 +265,10 @@ class PrintJob:
         st = link.status()
         delta = target_steps - st.paper_steps
         if delta:
-            f = self.profile.raw["feed"]
-            prof = 1 if f.get("profile") == "sigmoid" else 0
-            link.command(P.Op.FEED, struct.pack(P.FEED_FMT, delta, prof, int(f["max_steps_s"]),
-                                                int(f["accel_steps_s2"])))
+            f = self.profile.feed
+            prof = 1 if f.profile == "sigmoid" else 0
+            link.command(P.Op.FEED, struct.pack(P.FEED_FMT, delta, prof, int(f.max_steps_s),
+                                                int(f.accel_steps_s2)))
             st = self._wait(lambda s: s.motion == P.Motion.IDLE, "feeding paper")
         if st.paper_steps != target_steps:
             raise JobError(f"paper is at step {st.paper_steps}, expected {target_steps}: "

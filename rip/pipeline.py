@@ -64,11 +64,10 @@ def prefetch(items: Iterator, depth: int = 2) -> Iterator:
 
 def profile_curves(profile: Profile) -> np.ndarray | None:
     """(4, 256) uint8 linearisation LUT from the profile's [curves], None if identity."""
-    raw = profile.raw.get("curves", {})
     lut = np.empty((4, 256), np.uint8)
     x = np.arange(256)
     for c, name in enumerate(COLORS):
-        pts = np.asarray(raw.get(name, [[0, 0], [255, 255]]), dtype=np.float64)
+        pts = np.asarray(getattr(profile.curves, name), dtype=np.float64)
         lut[c] = np.clip(np.rint(np.interp(x, pts[:, 0], pts[:, 1])), 0, 255)
     return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
 
@@ -148,7 +147,7 @@ class RipJob(PrintableJob):
             return self.settings.ink_limit
         if self.source.colorspace == "cmyk":
             return None
-        return self.profile.raw.get("color", {}).get("ink_limit_percent")
+        return self.profile.color.ink_limit_percent
 
     def _separator(self) -> Separator:
         s = self.settings

@@ -3,14 +3,26 @@
 Everything geometric comes from the profile; docs/geometry.md explains the grid:
 columns at the dpi mode's pitch (encoder counts / k), rows at half the nozzle pitch
 (two heads per colour staggered by half a pitch), nozzles 0 and 127 never fire.
+
+The file is read and checked once, by load_profile: one frozen dataclass per [section],
+each key declared once below with its type, default and range (`_key`), so that a bad
+value is refused at load with the file, the section, the key and the problem, and the
+RIP, the driver and the emulator read typed attributes (profile.carriage.accel_mm_s2).
+The table in docs/geometry.md ("The profile file") is spec_markdown()'s output.
+
+This module imports nothing from wideprint: it is the printer description the RIP, the
+driver and the emulator share.
 """
 
 from __future__ import annotations
 
+import difflib
+import json
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import tomlkit
@@ -18,12 +30,286 @@ import tomlkit
 RESOURCES = Path(__file__).resolve().parent.parent / "resources"
 DEFAULT_PROFILE = RESOURCES / "printers" / "default.toml"
 COLORS = ("C", "M", "Y", "K")
+INTENTS = ("perceptual", "relative", "saturation", "absolute")   # as rip/color.py
+FPGA_HEAD_CHANNELS = 8
+WORDS_PER_FIRE = 8            # 128 nozzle bits in 16-bit FIFO words
 
 
 class ProfileError(ValueError):
     pass
 
 
+_REQUIRED = object()          # a key without a default
+
+
+# -- where a value sits, and how it is shown in a message ------------------------------------
+def _show(v: Any, limit: int = 60) -> str:
+    """A value as it would be written in TOML (strings quoted), shortened."""
+    if isinstance(v, bool):
+        s = "true" if v else "false"
+    elif isinstance(v, str):
+        s = json.dumps(v, ensure_ascii=False)
+    elif isinstance(v, dict):
+        s = "{ " + ", ".join(f"{k} = {_show(x)}" for k, x in v.items()) + " }" if v else "{}"
+    elif isinstance(v, (list, tuple)):
+        s = "[" + ", ".join(_show(x) for x in v) + "]"
+    else:
+        s = str(v)
+    return s if len(s) <= limit else s[:limit - 3] + "..."
+
+
+class _At:
+    """File, [section] and key (dotted / indexed inside arrays and tables) of a value."""
+
+    def __init__(self, path: Path | str, section: str, key: str = ""):
+        self.path, self.section, self.key = path, section, key
+
+    def sub(self, name: str) -> _At:
+        return _At(self.path, self.section, f"{self.key}.{name}" if self.key else name)
+
+    def item(self, i: int) -> _At:
+        return _At(self.path, self.section, f"{self.key}[{i}]")
+
+    def error(self, msg: str) -> ProfileError:
+        where = f"[{self.section}] {self.key}" if self.key else f"[{self.section}]"
+        return ProfileError(f"{self.path}: {where}: {msg}")
+
+    def bad(self, spec: _Spec, v: Any) -> ProfileError:
+        return self.error(f"must be {spec.what()}, not {_show(v)}")
+
+
+class _Ctx:
+    """The sections read so far (later sections are checked against earlier ones)."""
+
+    def __init__(self, path: Path | str):
+        self.path = path
+        self.sections: dict[str, Any] = {}
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self.sections[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+# -- value specs: parse one TOML value into its typed form, or raise naming where it is -------
+class _Spec:
+    kind = ""                      # the type column of the spec table
+
+    def what(self) -> str:         # "a number > 0": the message says "must be <what>"
+        raise NotImplementedError
+
+    def range(self) -> str:        # the range column of the spec table
+        return ""
+
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict) -> Any:
+        raise NotImplementedError
+
+
+class _Num(_Spec):
+    def __init__(self, integer: bool = False, *, gt=None, ge=None, le=None,
+                 multiple: int | None = None, choices: tuple | None = None):
+        self.integer, self.gt, self.ge, self.le = integer, gt, ge, le
+        self.multiple, self.choices = multiple, choices
+        self.kind = "int" if integer else "float"
+
+    def range(self) -> str:
+        if self.choices:
+            return ", ".join(str(c) for c in self.choices)
+        if self.ge is not None and self.le is not None:
+            parts = [f"{self.ge}..{self.le}"]
+        else:
+            low = f"> {self.gt}" if self.gt is not None else \
+                f">= {self.ge}" if self.ge is not None else ""
+            parts = [low, f"<= {self.le}" if self.le is not None else ""]
+        parts.append(f"a multiple of {self.multiple}" if self.multiple else "")
+        return " and ".join(p for p in parts if p)
+
+    def what(self, plural: bool = False) -> str:
+        if self.choices:
+            return (str(self.choices[0]) if len(self.choices) == 1
+                    else ("" if plural else "one of ") + self.range())
+        noun = ("integers" if plural else "an integer") if self.integer else \
+            ("numbers" if plural else "a number")
+        r = self.range()
+        if not r:
+            return noun
+        return f"{noun} in {r}" if r[0].isdigit() else f"{noun} {r}" if r[0] in "<>" \
+            else f"{noun}, {r}"
+
+    def parse(self, v, at, ctx, got):
+        ok = isinstance(v, int if self.integer else (int, float)) and not isinstance(v, bool)
+        x = (int(v) if self.integer else float(v)) if ok else None
+        if not ok or not math.isfinite(x) \
+                or self.choices and x not in self.choices \
+                or self.gt is not None and not x > self.gt \
+                or self.ge is not None and not x >= self.ge \
+                or self.le is not None and not x <= self.le \
+                or self.multiple and x % self.multiple:
+            raise at.bad(self, v)
+        return x
+
+
+class _Str(_Spec):
+    kind = "str"
+
+    def __init__(self, choices: tuple[str, ...] | None = None):
+        self.choices = choices
+
+    def range(self) -> str:
+        return ", ".join(json.dumps(c) for c in self.choices) if self.choices else "not empty"
+
+    def what(self, plural: bool = False) -> str:
+        if self.choices:
+            return f"one of {self.range()}"
+        return "non-empty strings" if plural else "a non-empty string"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, str) or not v.strip() or self.choices and v not in self.choices:
+            raise at.bad(self, v)
+        return v
+
+
+class _Bool(_Spec):
+    kind = "bool"
+
+    def what(self, plural: bool = False) -> str:
+        return "true or false"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, bool):
+            raise at.bad(self, v)
+        return v
+
+
+class _List(_Spec):
+    def __init__(self, item: _Spec, min_len: int = 0, distinct: bool = False):
+        self.item, self.min_len, self.distinct = item, min_len, distinct
+        self.kind = f"list of {item.kind}"
+
+    def range(self) -> str:
+        r = self.item.range()
+        own = ", ".join(p for p in ("at least one" if self.min_len else "",
+                                    "distinct" if self.distinct else "") if p)
+        return "; ".join(p for p in (own, r and f"each {r}") if p)
+
+    def what(self) -> str:
+        return f"a {'non-empty ' if self.min_len else ''}list of {self.item.what(plural=True)}"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, list) or len(v) < self.min_len:
+            raise at.bad(self, v)
+        out = tuple(self.item.parse(x, at.item(i), ctx, got) for i, x in enumerate(v))
+        if self.distinct:
+            dup = next((x for i, x in enumerate(out) if x in out[:i]), None)
+            if dup is not None:
+                raise at.error(f"{_show(dup)} is listed twice")
+        return out
+
+
+class _DpiTable(_Spec):
+    """{ dpi = value, ... } keyed by the [encoder] dpi modes; `fill` for modes not listed
+    (None: every mode must be listed)."""
+
+    def __init__(self, value: _Num, fill=None):
+        self.value, self.fill = value, fill
+        self.kind = f"table dpi → {value.kind}"
+
+    def range(self) -> str:
+        r = self.value.range()
+        return (f"each {r}; " if r else "") + ("every dpi mode" if self.fill is None
+                                                else f"modes not listed: {self.fill}")
+
+    def what(self) -> str:
+        return f"a table {{ dpi = {self.value.what()}, ... }}"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, dict):
+            raise at.bad(self, v)
+        modes = ctx.encoder.dpi_modes
+        out = {}
+        for key, x in v.items():
+            if not (key.isdigit() and int(key) in modes):
+                raise at.sub(key).error(
+                    f"not a dpi mode ([encoder] dpi_modes: {', '.join(map(str, modes))})")
+            out[int(key)] = self.value.parse(x, at.sub(key), ctx, got)
+        for d in modes:
+            if d not in out:
+                if self.fill is None:
+                    raise at.error(f"no value for dpi {d} (every dpi mode needs one)")
+                out[d] = self.fill
+        return {d: out[d] for d in sorted(out)}
+
+
+def _read_keys(table: dict, at: _At, keys: list[tuple[str, _Spec, Any]], ctx: _Ctx) -> dict:
+    """Each key of `keys` (name, spec, default or _REQUIRED) parsed from the TOML table;
+    an unknown key is an error naming the known ones."""
+    names = [k for k, _, _ in keys]
+    for k in table:
+        if k not in names:
+            near = difflib.get_close_matches(k, names, 1)
+            raise at.sub(k).error(f"unknown key (known keys: {', '.join(names)})"
+                                  + (f"; did you mean {near[0]}?" if near else ""))
+    got: dict[str, Any] = {}
+    for name, spec, default in keys:
+        if name in table:
+            got[name] = spec.parse(table[name], at.sub(name), ctx, got)
+        elif default is _REQUIRED:
+            raise at.sub(name).error(f"missing required key ({spec.what()})")
+        else:   # defaults are TOML values, typed by the same spec
+            got[name] = None if default is None else spec.parse(default, at.sub(name), ctx, got)
+    return got
+
+
+class _Table(_Spec):
+    """An inline table with fixed keys, all required (a head, a dead nozzle)."""
+
+    def __init__(self, keys: list[tuple[str, _Spec]], make):
+        self.keys = [(k, s, _REQUIRED) for k, s in keys]
+        self.make = make
+        self.kind = "{ " + ", ".join(k for k, _ in keys) + " }"
+
+    def what(self, plural: bool = False) -> str:
+        return "tables " + self.kind if plural else "a table " + self.kind
+
+    def range(self) -> str:
+        return "; ".join(f"{k}: {s.range()}" for k, s, _ in self.keys if s.range())
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, dict):
+            raise at.bad(self, v)
+        return self.make(_read_keys(v, at, self.keys, ctx), at, ctx, got)
+
+
+class _Curve(_Spec):
+    kind = "list of [in, out]"
+
+    def range(self) -> str:
+        return "0..255, in increasing, at least 2 points"
+
+    def what(self) -> str:
+        return "a list of at least 2 [in, out] points, numbers 0..255, in increasing"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, list) or len(v) < 2:
+            raise at.bad(self, v)
+        pts = []
+        for i, p in enumerate(v):
+            if not (isinstance(p, list) and len(p) == 2):
+                raise at.item(i).error(f"must be an [in, out] pair, not {_show(p)}")
+            pts.append(tuple(_Num(ge=0, le=255).parse(x, at.item(i), ctx, got) for x in p))
+            if i and not pts[-1][0] > pts[-2][0]:
+                raise at.item(i).error(f"in must increase: {_show(p)} follows {_show(v[i - 1])}")
+        return tuple(pts)
+
+
+def _key(spec: _Spec, default: Any = _REQUIRED, doc: str = "", shown: str | None = None):
+    """A profile key: its spec, its default as a TOML value (_REQUIRED: none; None: absent
+    means `shown`) and what it is, for the spec table."""
+    return field(metadata=dict(spec=spec, default=default, doc=doc, shown=shown))
+
+
+# -- the sections ----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Head:
     index: int
@@ -37,26 +323,390 @@ class Head:
         return COLORS.index(self.color)
 
 
-@dataclass(frozen=True)
+def _make_dead(v: dict, at: _At, ctx: _Ctx, got: dict) -> tuple[int, int]:
+    """(head index, nozzle) of a dead nozzle named by head name."""
+    index = {h.name: h.index for h in got["heads"]}
+    if v["head"] not in index:
+        raise at.sub("head").error(f"no head {_show(v['head'])} (heads: {', '.join(index)})")
+    head = ctx.head
+    if v["nozzle"] >= head.nozzles or v["nozzle"] in head.dead_end_nozzles:
+        raise at.sub("nozzle").error(
+            f"must be a nozzle that fires, 0..{head.nozzles - 1} but not "
+            f"{', '.join(map(str, head.dead_end_nozzles))} (dead_end_nozzles), not {v['nozzle']}")
+    return index[v["head"]], v["nozzle"]
+
+
+_HEAD = _Table([("name", _Str()), ("color", _Str(COLORS)), ("x_counts", _Num(True)),
+                ("y_rows", _Num(True, ge=0))], lambda v, at, ctx, got: v)
+_DEAD = _Table([("head", _Str()), ("nozzle", _Num(True, ge=0))], _make_dead)
+
+
+class _Heads(_List):
+    def __init__(self):
+        super().__init__(_HEAD, min_len=1)
+
+    def parse(self, v, at, ctx, got):
+        heads = tuple(Head(i, **h) for i, h in enumerate(super().parse(v, at, ctx, got)))
+        seen = set()
+        for h in heads:
+            if h.name in seen:
+                raise at.item(h.index).sub("name").error(f"{_show(h.name)} is used by two heads")
+            seen.add(h.name)
+        return heads
+
+
+class _DeadNozzles(_List):
+    def __init__(self):
+        super().__init__(_DEAD)
+
+    def parse(self, v, at, ctx, got):
+        return frozenset(super().parse(v, at, ctx, got))
+
+
+class _Section:
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        """Checks between keys, and against earlier sections."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PrinterSection(_Section):
+    name: str = _key(_Str(), doc="shown to the operator and in reports")
+    print_width_mm: float = _key(_Num(gt=0), doc="mm, the widest printable span")
+
+
+@dataclass(frozen=True, kw_only=True)
+class EncoderSection(_Section):
+    lines_per_inch: int = _key(_Num(True, gt=0), doc="the linear encoder strip")
+    quadrature: int = _key(_Num(True, choices=(1, 2, 4)), 4,
+                           doc="edges counted per line (counts per inch = lines x quadrature)")
+    dpi_modes: tuple[int, ...] = _key(_List(_Num(True, gt=0), min_len=1, distinct=True),
+                                      doc="column pitches; each divides the counts per inch")
+
+    @property
+    def counts_per_inch(self) -> int:
+        return self.lines_per_inch * self.quadrature
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        for i, d in enumerate(self.dpi_modes):
+            if self.counts_per_inch % d:
+                raise at.sub("dpi_modes").item(i).error(
+                    f"{d} does not divide the {self.counts_per_inch} counts per inch "
+                    f"(lines_per_inch {self.lines_per_inch} x quadrature {self.quadrature})")
+
+
+@dataclass(frozen=True, kw_only=True)
+class HeadSection(_Section):
+    model: str = _key(_Str(), "XJ128-360", doc="informational")
+    nozzles: int = _key(_Num(True, choices=(128,)), 128,
+                        doc="an XJ128: a fire is 8 FIFO words of 16 bits")
+    dead_end_nozzles: tuple[int, ...] = _key(_List(_Num(True, ge=0)), [0, 127],
+                                             doc="never fire; each < nozzles")
+    nozzle_pitch_um: float = _key(_Num(gt=0), doc="row pitch = nozzle pitch / heads per colour")
+    drop_volume_pl: float = _key(_Num(gt=0), doc="ink estimates")
+    max_fire_hz: float = _key(_Num(gt=0), doc="caps each dpi mode's speed at 99 %")
+    phases: int = _key(_Num(True, ge=1), 3, doc="CYCLESTB phases (informational)")
+    config_file: str = _key(_Str(), doc="path under resources/; the file must exist "
+                            "(docs/head-config.md)")
+    overtemp_c: float = _key(_Num(), 55.0, doc="°C: the carriage board drops WE_EN above")
+    nominal_temp_c: float = _key(_Num(), 35.0, doc="°C, the emulated heads'; < overtemp_c")
+
+    @property
+    def config_path(self) -> Path:
+        return RESOURCES / self.config_file
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        for i, n in enumerate(self.dead_end_nozzles):
+            if n >= self.nozzles:
+                raise at.sub("dead_end_nozzles").item(i).error(
+                    f"must be a nozzle 0..{self.nozzles - 1}, not {n}")
+        if not self.config_path.is_file():
+            raise at.sub("config_file").error(f"no such file {self.config_path}")
+        if not self.nominal_temp_c < self.overtemp_c:
+            raise at.sub("nominal_temp_c").error(
+                f"must be below overtemp_c ({self.overtemp_c}), not {self.nominal_temp_c}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LayoutSection(_Section):
+    heads: tuple[Head, ...] = _key(_Heads(), doc="x_counts: encoder counts from the carriage "
+                                   "reference, whole columns of the coarsest dpi mode; y_rows: "
+                                   "rows from swath slot 0. At most 8 heads, the same number per "
+                                   "colour, no two of a colour on one row, some row every colour "
+                                   "prints")
+    dead_nozzles: frozenset[tuple[int, int]] = _key(
+        _DeadNozzles(), [], doc="head names; nozzles that fire otherwise. Loaded as "
+        "(head index, nozzle); the pass planner prints around them")
+    bidir_offset_columns: dict[int, int] = _key(_DpiTable(_Num(True), fill=0), {},
+                                                doc="columns reverse passes are shifted by (bidir "
+                                                "alignment)")
+
+    @property
+    def heads_per_color(self) -> int:
+        return len(self.heads) // len(COLORS)
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        at_heads = at.sub("heads")
+        if len(self.heads) > FPGA_HEAD_CHANNELS:
+            raise at_heads.error(f"the FPGA has {FPGA_HEAD_CHANNELS} head channels, "
+                                 f"not {len(self.heads)}")
+        count = {c: sum(h.color == c for h in self.heads) for c in COLORS}
+        if len(set(count.values())) != 1:
+            raise at_heads.error("every colour needs the same number of heads, not "
+                                 + ", ".join(f"{c}: {n}" for c, n in count.items()))
+        kmax = max(ctx.encoder.counts_per_inch // d for d in ctx.encoder.dpi_modes)
+        for h in self.heads:
+            if h.x_counts % kmax:
+                raise at_heads.item(h.index).sub("x_counts").error(
+                    f"must be a multiple of {kmax} (whole columns at "
+                    f"{min(ctx.encoder.dpi_modes)} dpi), not {h.x_counts}")
+        hpc = self.heads_per_color
+        live = set(range(ctx.head.nozzles)) - set(ctx.head.dead_end_nozzles)
+        rows: dict[str, dict[int, str]] = {c: {} for c in COLORS}
+        for h in self.heads:
+            for n in live:
+                other = rows[h.color].setdefault(h.y_rows + n * hpc, h.name)
+                if other != h.name:
+                    raise at_heads.error(f"heads {other} and {h.name} print the same row")
+        if not set.intersection(*(set(r) for r in rows.values())):
+            raise at_heads.error("no row that every colour can print (y_rows)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CarriageSection(_Section):
+    rail_counts: int = _key(_Num(True, gt=0), doc="encoder counts between the limit switches")
+    home_counts: int = _key(_Num(True, ge=0), 0, doc="<= rail_counts (informational)")
+    park_counts: int = _key(_Num(True, ge=0), doc="over the capping station; <= rail_counts")
+    max_speed_mm_s: float = _key(_Num(gt=0), doc="moves that do not print; caps speed_mm_s")
+    accel_mm_s2: float = _key(_Num(gt=0), doc="every carriage move")
+    speed_mm_s: dict[int, float] = _key(_DpiTable(_Num(gt=0)),
+                                        doc="printing speed, capped by max_speed_mm_s "
+                                        "and max_fire_hz")
+    # the DC servo plant and loop, for the emulator (docs/motion.md)
+    motor_ke: float = _key(_Num(gt=0), 0.0287, doc="servo: back-EMF constant, V s/rad")
+    motor_kt: float | None = _key(_Num(gt=0), None, doc="servo: torque constant, N m/A",
+                                  shown="= motor_ke")
+    motor_r_ohm: float = _key(_Num(gt=0), 1.89, doc="servo: armature resistance")
+    motor_l_h: float = _key(_Num(gt=0), 0.00156, doc="servo: armature inductance")
+    supply_v: float = _key(_Num(gt=0), 19.1, doc="servo: L298 bridge supply")
+    current_limit_a: float = _key(_Num(gt=0), 2.0, doc="servo: LM393 current cut")
+    inertia_kg_m2: float = _key(_Num(gt=0), 0.0001,
+                                doc="servo: at the motor shaft, carriage included")
+    friction_nm: float = _key(_Num(ge=0), 0.0, doc="servo: Coulomb friction at the shaft")
+    pulley_diameter_mm: float = _key(_Num(gt=0), 10.0, doc="servo: belt pulley")
+    servo_period_s: float = _key(_Num(gt=0), 0.001,
+                                 doc="servo: DSP loop period; the gains are tuned for it")
+    kp: float = _key(_Num(gt=0), 32.0, doc="servo: the thesis' PI gain (informational)")
+    ti_s: float = _key(_Num(ge=0), 1.32, doc="servo: integral time of the position error (0: none)")
+
+    @property
+    def torque_constant(self) -> float:
+        return self.motor_ke if self.motor_kt is None else self.motor_kt
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        for key in ("home_counts", "park_counts"):
+            if getattr(self, key) > self.rail_counts:
+                raise at.sub(key).error(f"must be <= rail_counts ({self.rail_counts}), "
+                                        f"not {getattr(self, key)}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FeedSection(_Section):
+    steps_per_rev: int = _key(_Num(True, gt=0), doc="stepper (half-)steps per motor turn")
+    gear_ratio: float = _key(_Num(gt=0), doc="motor turns per roller turn")
+    roller_radius_mm: float = _key(_Num(gt=0), doc="a feed step must be <= half a row")
+    max_steps_s: float = _key(_Num(gt=0), doc="feed speed")
+    accel_steps_s2: float = _key(_Num(gt=0), doc="feed acceleration")
+    profile: str = _key(_Str(("trapezoid", "sigmoid")), "trapezoid", doc="feed speed profile")
+
+    @property
+    def um_per_step(self) -> float:
+        return 2 * math.pi * self.roller_radius_mm * 1000 / (self.steps_per_rev * self.gear_ratio)
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        row_um = ctx.head.nozzle_pitch_um / ctx.layout.heads_per_color
+        if self.um_per_step > row_um / 2:
+            raise at.sub("steps_per_rev, gear_ratio, roller_radius_mm").error(
+                f"a feed step ({self.um_per_step:.1f} um) is coarser than half a row "
+                f"({row_um / 2:.1f} um)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FpgaSection(_Section):
+    fifo_words: int = _key(_Num(True, gt=0, multiple=WORDS_PER_FIRE),
+                           doc="FIFO depth per head, 16-bit words")
+    almost_empty_words: int = _key(_Num(True, ge=0), 64, doc="FIFO flag level; < fifo_words")
+    pass_buffer_words: int = _key(_Num(True, ge=0), 0,
+                                  doc="on-card pass buffer per head (0: FIFO only)")
+    dma_ring_blocks: int = _key(_Num(True, ge=1), doc="DMA blocks the host may have in flight")
+    block_fires: int = _key(_Num(True, ge=1), doc="fires per head per data block; its 8 "
+                            "words a fire fit fifo_words + pass_buffer_words")
+    starve_guard: bool = _key(_Bool(), True, doc="re-run a line from a dry FIFO (false: "
+                              "an underrun is a fault)")
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        if self.almost_empty_words >= self.fifo_words:
+            raise at.sub("almost_empty_words").error(
+                f"must be below fifo_words ({self.fifo_words}), not {self.almost_empty_words}")
+        room = self.fifo_words + self.pass_buffer_words
+        if self.block_fires * WORDS_PER_FIRE > room:
+            raise at.sub("block_fires").error(
+                f"a data block of {self.block_fires} fires ({self.block_fires * WORDS_PER_FIRE} "
+                f"words) must fit fifo_words + pass_buffer_words ({room} words)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinkSection(_Section):
+    baud: int = _key(_Num(True, gt=0), 57600, doc="serial command link; a device spec's "
+                     "baud= overrides it")
+    retries: int = _key(_Num(True, ge=1), 3, doc="tries per frame (informational: the link "
+                       "makes the protocol's 3)")
+    response_timeout_s: float = _key(_Num(gt=0), 0.25, doc="command link")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PaperSection(_Section):
+    default_width_mm: float = _key(_Num(gt=0), doc="the emulator's sheet; the GUI's "
+                                    "until the paper is measured")
+    margin_mm: float = _key(_Num(ge=0), 5.0, doc="side margins inside the measured edges "
+                            "(a job's placement may override); 2 x < print_width_mm")
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        if 2 * self.margin_mm >= ctx.printer.print_width_mm:
+            raise at.sub("margin_mm").error(
+                f"two margins of {self.margin_mm} mm leave nothing of the "
+                f"{ctx.printer.print_width_mm} mm print width")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ColorSection(_Section):
+    ink_limit_percent: float | None = _key(_Num(gt=0, le=400), None, shown="none",
+                                           doc="for separations made from RGB or grey; "
+                                           "none: no limit")
+    intent: str = _key(_Str(INTENTS), "relative", doc="informational: jobs choose theirs")
+
+
+_IDENTITY = [[0, 0], [255, 255]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CurvesSection(_Section):
+    C: tuple[tuple[float, float], ...] = _key(_Curve(), _IDENTITY,
+                                              doc="linearisation: in -> out, interpolated")
+    M: tuple[tuple[float, float], ...] = _key(_Curve(), _IDENTITY, doc="as C")
+    Y: tuple[tuple[float, float], ...] = _key(_Curve(), _IDENTITY, doc="as C")
+    K: tuple[tuple[float, float], ...] = _key(_Curve(), _IDENTITY, doc="as C")
+
+
+# the sections in file (and checking) order: later ones are checked against earlier ones
+SECTIONS: dict[str, type] = {
+    "printer": PrinterSection, "encoder": EncoderSection, "head": HeadSection,
+    "layout": LayoutSection, "carriage": CarriageSection, "feed": FeedSection,
+    "fpga": FpgaSection, "link": LinkSection, "paper": PaperSection,
+    "color": ColorSection, "curves": CurvesSection,
+}
+
+
+def _keys_of(cls) -> list[tuple[str, _Spec, Any]]:
+    return [(f.name, f.metadata["spec"], f.metadata["default"]) for f in fields(cls)]
+
+
+def _read_section(name: str, cls, doc: dict, ctx: _Ctx):
+    at = _At(ctx.path, name)
+    keys = _keys_of(cls)
+    table = doc.get(name)
+    if table is None:
+        if any(d is _REQUIRED for _, _, d in keys):
+            raise at.error("missing section (keys: " + ", ".join(k for k, _, _ in keys) + ")")
+        table = {}
+    elif not isinstance(table, dict):
+        raise at.error(f"must be a table of keys, not {_show(table)}")
+    section = cls(**_read_keys(table, at, keys, ctx))
+    section._check(at, ctx)
+    return section
+
+
+@dataclass(frozen=True, kw_only=True)
 class Profile:
+    """A loaded profile: its sections as typed attributes, the flat names most code uses,
+    and the device grid derived from them."""
     path: str
-    name: str
-    raw: dict = field(repr=False, compare=False)
-    heads: tuple[Head, ...]
-    nozzles: int
-    dead_end_nozzles: tuple[int, ...]
-    dead_nozzles: frozenset[tuple[int, int]]          # (head index, nozzle)
-    nozzle_pitch_um: float
-    counts_per_inch: int
-    dpi_modes: tuple[int, ...]
-    bidir_offset_columns: dict[int, int]
-    max_fire_hz: float
-    drop_volume_pl: float
-    fifo_words: int
-    pass_buffer_words: int
-    ring_blocks: int
-    block_fires: int
-    print_width_mm: float
+    printer: PrinterSection
+    encoder: EncoderSection
+    head: HeadSection
+    layout: LayoutSection
+    carriage: CarriageSection
+    feed: FeedSection
+    fpga: FpgaSection
+    link: LinkSection
+    paper: PaperSection
+    color: ColorSection
+    curves: CurvesSection
+
+    # -- the names most of the code uses ------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return self.printer.name
+
+    @property
+    def print_width_mm(self) -> float:
+        return self.printer.print_width_mm
+
+    @property
+    def heads(self) -> tuple[Head, ...]:
+        return self.layout.heads
+
+    @property
+    def dead_nozzles(self) -> frozenset[tuple[int, int]]:
+        """(head index, nozzle)"""
+        return self.layout.dead_nozzles
+
+    @property
+    def bidir_offset_columns(self) -> dict[int, int]:
+        return self.layout.bidir_offset_columns
+
+    @property
+    def nozzles(self) -> int:
+        return self.head.nozzles
+
+    @property
+    def dead_end_nozzles(self) -> tuple[int, ...]:
+        return self.head.dead_end_nozzles
+
+    @property
+    def nozzle_pitch_um(self) -> float:
+        return self.head.nozzle_pitch_um
+
+    @property
+    def max_fire_hz(self) -> float:
+        return self.head.max_fire_hz
+
+    @property
+    def drop_volume_pl(self) -> float:
+        return self.head.drop_volume_pl
+
+    @property
+    def counts_per_inch(self) -> int:
+        return self.encoder.counts_per_inch
+
+    @property
+    def dpi_modes(self) -> tuple[int, ...]:
+        return self.encoder.dpi_modes
+
+    @property
+    def fifo_words(self) -> int:
+        return self.fpga.fifo_words
+
+    @property
+    def pass_buffer_words(self) -> int:
+        return self.fpga.pass_buffer_words
+
+    @property
+    def ring_blocks(self) -> int:
+        return self.fpga.dma_ring_blocks
+
+    @property
+    def block_fires(self) -> int:
+        return self.fpga.block_fires
 
     # -- the device grid --------------------------------------------------------------
     @property
@@ -70,7 +720,7 @@ class Profile:
 
     @property
     def heads_per_color(self) -> int:
-        return len(self.heads) // len(COLORS)
+        return self.layout.heads_per_color
 
     @property
     def swath_rows(self) -> int:
@@ -97,7 +747,7 @@ class Profile:
                         include_dead and (head.index, nozzle) in self.dead_nozzles):
                     continue
                 slot = head.y_rows + nozzle * self.heads_per_color
-                if table[head.channel, slot, 0] >= 0:
+                if table[head.channel, slot, 0] >= 0:   # load_profile refuses this already
                     raise ProfileError(f"{self.path}: heads {head.name} and "
                                        f"{self.heads[table[head.channel, slot, 0]].name} "
                                        f"print the same row")
@@ -122,8 +772,7 @@ class Profile:
     # -- feed ---------------------------------------------------------------------------
     @property
     def feed_um_per_step(self) -> float:
-        f = self.raw["feed"]
-        return 2 * math.pi * f["roller_radius_mm"] * 1000 / (f["steps_per_rev"] * f["gear_ratio"])
+        return self.feed.um_per_step
 
     def feed_steps_for_rows(self, rows_total: int) -> int:
         """Cumulative feed steps that put the paper `rows_total` rows from its start.
@@ -132,20 +781,20 @@ class Profile:
 
     # -- carriage ---------------------------------------------------------------------------
     def speed_counts_s(self, dpi: int) -> int:
-        mm_s = float(self.raw["carriage"]["speed_mm_s"][str(dpi)])
+        c = self.carriage
         max_by_head = self.max_fire_hz * 25.4 / dpi
-        mm_s = min(mm_s, float(self.raw["carriage"]["max_speed_mm_s"]), max_by_head * 0.99)
+        mm_s = min(c.speed_mm_s[dpi], c.max_speed_mm_s, max_by_head * 0.99)
         return int(mm_s / 25.4 * self.counts_per_inch)
 
     def accel_counts_s2(self) -> int:
-        return int(float(self.raw["carriage"]["accel_mm_s2"]) / 25.4 * self.counts_per_inch)
+        return int(self.carriage.accel_mm_s2 / 25.4 * self.counts_per_inch)
 
     @property
     def rail_counts(self) -> int:
-        return int(self.raw["carriage"]["rail_counts"])
+        return self.carriage.rail_counts
 
     def head_config_path(self) -> Path:
-        return RESOURCES / self.raw["head"]["config_file"]
+        return self.head.config_path
 
     def head_config_digits(self) -> list[int]:
         """The head configuration file (docs/head-config.md): hex digits, whitespace and
@@ -163,63 +812,46 @@ class Profile:
 
 
 def load_profile(path: str | Path | None = None) -> Profile:
+    """Read and check a printer profile (None: the built-in default.toml)."""
     path = Path(path) if path else DEFAULT_PROFILE
     try:
-        raw = tomllib.loads(path.read_text())
+        text = path.read_text()
     except FileNotFoundError:
         raise ProfileError(f"{path}: printer profile not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"{path}: cannot read the printer profile ({exc})") from None
+    return _parse(text, path)
+
+
+def _parse(text: str, path: Path) -> Profile:
+    """The profile in `text`; messages name `path`."""
+    try:
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{path}: not a valid TOML printer profile ({exc})") from None
-    try:
-        enc, head, layout, fpga = raw["encoder"], raw["head"], raw["layout"], raw["fpga"]
-        counts = int(enc["lines_per_inch"]) * int(enc["quadrature"])
-        heads = tuple(Head(i, h["name"], h["color"], int(h["x_counts"]), int(h["y_rows"]))
-                      for i, h in enumerate(layout["heads"]))
-        names = {h.name: h.index for h in heads}
-        dead = frozenset((names[d["head"]], int(d["nozzle"])) for d in layout.get("dead_nozzles", []))
-        dpi_modes = tuple(int(d) for d in enc["dpi_modes"])
-        prof = Profile(
-            path=str(path), name=raw["printer"]["name"], raw=raw, heads=heads,
-            nozzles=int(head["nozzles"]),
-            dead_end_nozzles=tuple(int(n) for n in head["dead_end_nozzles"]),
-            dead_nozzles=dead, nozzle_pitch_um=float(head["nozzle_pitch_um"]),
-            counts_per_inch=counts, dpi_modes=dpi_modes,
-            bidir_offset_columns={int(k): int(v) for k, v in layout["bidir_offset_columns"].items()},
-            max_fire_hz=float(head["max_fire_hz"]), drop_volume_pl=float(head["drop_volume_pl"]),
-            fifo_words=int(fpga["fifo_words"]), pass_buffer_words=int(fpga["pass_buffer_words"]),
-            ring_blocks=int(fpga["dma_ring_blocks"]), block_fires=int(fpga["block_fires"]),
-            print_width_mm=float(raw["printer"]["print_width_mm"]),
-        )
-    except KeyError as exc:
-        raise ProfileError(f"{path}: missing key {exc}") from None
-    except (TypeError, ValueError) as exc:
-        raise ProfileError(f"{path}: bad value ({exc})") from None
-    _validate(prof)
-    return prof
+    for name in doc:
+        if name not in SECTIONS:
+            near = difflib.get_close_matches(name, list(SECTIONS), 1)
+            raise ProfileError(f"{path}: [{name}]: unknown section (known sections: "
+                               f"{', '.join(SECTIONS)})"
+                               + (f"; did you mean [{near[0]}]?" if near else ""))
+    ctx = _Ctx(path)
+    for name, cls in SECTIONS.items():
+        ctx.sections[name] = _read_section(name, cls, doc, ctx)
+    return Profile(path=str(path), **ctx.sections)
 
 
-def _validate(p: Profile) -> None:
-    if sorted(h.color for h in p.heads) != sorted(COLORS * (len(p.heads) // len(COLORS))) \
-            or len(p.heads) % len(COLORS):
-        raise ProfileError(f"{p.path}: heads must be {len(COLORS)} colours x the same count")
-    if len(p.heads) > 8:
-        raise ProfileError(f"{p.path}: the FPGA has 8 head channels")
-    if p.nozzles != 128:
-        raise ProfileError(f"{p.path}: an XJ128 has 128 nozzles")
-    kmax = max(p.counts_per_inch // d for d in p.dpi_modes)
-    for d in p.dpi_modes:
-        if p.counts_per_inch % d:
-            raise ProfileError(f"{p.path}: dpi {d} does not divide {p.counts_per_inch} counts/inch")
-    for h in p.heads:
-        if h.x_counts % kmax:
-            raise ProfileError(f"{p.path}: head {h.name} x offset {h.x_counts} counts is not a "
-                               f"multiple of {kmax} (whole columns at {min(p.dpi_modes)} dpi)")
-    if p.fifo_words % 8 or p.block_fires * 8 > p.fifo_words + p.pass_buffer_words:
-        raise ProfileError(f"{p.path}: a data block ({p.block_fires} fires) must fit the FIFO")
-    p.slot_table()  # raises on overlapping rows
-    if p.feed_um_per_step > p.row_um / 2:
-        raise ProfileError(f"{p.path}: a feed step ({p.feed_um_per_step:.1f} um) is coarser "
-                           f"than half a row ({p.row_um / 2:.1f} um)")
+def spec_markdown() -> str:
+    """The profile's keys as a Markdown table (docs/geometry.md, "The profile file")."""
+    rows = ["| key | type | default | range | notes |", "|---|---|---|---|---|"]
+    for name, cls in SECTIONS.items():
+        for f in fields(cls):
+            spec, default, shown = (f.metadata[k] for k in ("spec", "default", "shown"))
+            dflt = ("required" if default is _REQUIRED else shown if default is None
+                    else f"`{_show(default)}`")
+            rows.append(f"| `[{name}] {f.name}` | {spec.kind} | {dflt} | {spec.range()} "
+                        f"| {f.metadata['doc']} |")
+    return "\n".join(rows) + "\n"
 
 
 def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | None = None,
@@ -245,8 +877,9 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
         raise ProfileError(f"{path}: no [layout] table to update")
     if bidir_offset_columns is not None:
         table = layout.get("bidir_offset_columns")
-        if table is None:
-            raise ProfileError(f"{path}: no bidir_offset_columns to update")
+        if table is None:                # optional key: add it
+            layout["bidir_offset_columns"] = tomlkit.inline_table()
+            table = layout["bidir_offset_columns"]
         new = {str(int(k)): int(v) for k, v in sorted(bidir_offset_columns.items())}
         for key in [k for k in table if k not in new]:
             del table[key]
@@ -262,13 +895,10 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
         value = ("[" + ", ".join(items) + "]" if len(items) <= 4 else       # one a line if many
                  "[\n" + "".join(f"  {it},\n" for it in items) + "]")
         layout["dead_nozzles"] = tomlkit.parse(f"v = {value}")["v"]
+    text = tomlkit.dumps(doc)
+    _parse(text, path)               # checked before the file changes, messages name it
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(tomlkit.dumps(doc))
-    try:
-        load_profile(tmp)
-    except ProfileError:
-        tmp.unlink()
-        raise
+    tmp.write_text(text)
     tmp.replace(path)
     return load_profile(path)
 

@@ -136,7 +136,8 @@ class PatternJob(PrintableJob):
         self.height, self.width = self.planes.shape[:2]
         # a test print fires every nozzle, also those the profile lists as dead: a nozzle
         # check must show whether they work again, and one pass cannot be planned around them
-        self.profile = dataclasses.replace(self.profile, dead_nozzles=frozenset())
+        self.profile = dataclasses.replace(self.profile, layout=dataclasses.replace(
+            self.profile.layout, dead_nozzles=frozenset()))
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         for y in range(0, self.height, self.settings.band_rows):

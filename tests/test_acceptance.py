@@ -153,7 +153,7 @@ def test_position_and_margins_on_the_measured_paper(tmp_path, profile, align, x_
     done, steps = runs[top_mm]
     cpi = profile.counts_per_inch
     width_mm = 333 * profile.k(300) / cpi * 25.4
-    margin = profile.raw["paper"]["margin_mm"] if margin_mm is None else margin_mm
+    margin = profile.paper.margin_mm if margin_mm is None else margin_mm
     want = {"left": margin, "center": (paper - width_mm) / 2,
             "right": paper - margin - width_mm}[align] + x_mm
     # x0 sits on the coarsest dpi mode's column grid, inside the margins

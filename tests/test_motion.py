@@ -245,12 +245,12 @@ def test_feed_move_phases_and_direction():
 
 # -- profiles -------------------------------------------------------------------------------------
 def test_trapezoid_feed(profile):
-    f = profile.raw["feed"]
-    res = feed_move(800, "trapezoid", f["max_steps_s"], f["accel_steps_s2"])
+    f = profile.feed
+    res = feed_move(800, "trapezoid", f.max_steps_s, f.accel_steps_s2)
     assert res.step_times.size == 800
     assert [s.v1 for s in res.segments][:2] == [res.segments[1].v0, res.segments[2].v0]
-    assert res.peak_rate == pytest.approx(f["max_steps_s"], rel=0.01)
-    ideal = Trapezoid(0, 800, f["max_steps_s"], f["accel_steps_s2"]).duration
+    assert res.peak_rate == pytest.approx(f.max_steps_s, rel=0.01)
+    ideal = Trapezoid(0, 800, f.max_steps_s, f.accel_steps_s2).duration
     assert res.duration == pytest.approx(ideal, rel=0.05)    # starts at 200 steps/s, not 0
 
 
@@ -268,9 +268,9 @@ def test_sigmoid_discretisation_12_to_16():
 
 
 def test_sigmoid_is_jerk_limited(profile):
-    f = profile.raw["feed"]
-    s = feed_move(800, "sigmoid", f["max_steps_s"], f["accel_steps_s2"])
-    t = feed_move(800, "trapezoid", f["max_steps_s"], f["accel_steps_s2"])
+    f = profile.feed
+    s = feed_move(800, "sigmoid", f.max_steps_s, f.accel_steps_s2)
+    t = feed_move(800, "trapezoid", f.max_steps_s, f.accel_steps_s2)
     assert s.step_times.size == 800
     # continuous speed: every segment starts at the speed the previous one ended at
     assert all(a.v1 == b.v0 for a, b in zip(s.segments, s.segments[1:]))
@@ -279,7 +279,7 @@ def test_sigmoid_is_jerk_limited(profile):
     # acceleration starts (and ends) at ~0 and changes in small steps
     acc = s.segment_accelerations()
     peak = np.max(np.abs(acc))
-    assert peak <= f["accel_steps_s2"] * 1.001
+    assert peak <= f.accel_steps_s2 * 1.001
     assert abs(acc[0]) < 0.03 * peak and abs(acc[-1]) < 0.03 * peak
     jumps = np.abs(np.diff(np.concatenate(([0.0], acc, [0.0]))))
     assert jumps.max() < 0.3 * peak
@@ -288,13 +288,13 @@ def test_sigmoid_is_jerk_limited(profile):
         np.max(np.abs(tacc)))                                # the trapezoid jumps 0 -> a_max
     # same peak acceleration: the S-curve pays in time (docs/motion.md)
     assert 1.3 < s.duration / t.duration < 1.8
-    long_s = feed_move(10_000, "sigmoid", f["max_steps_s"], f["accel_steps_s2"])
-    long_t = feed_move(10_000, "trapezoid", f["max_steps_s"], f["accel_steps_s2"])
+    long_s = feed_move(10_000, "sigmoid", f.max_steps_s, f.accel_steps_s2)
+    long_t = feed_move(10_000, "trapezoid", f.max_steps_s, f.accel_steps_s2)
     # a long move: each ramp lasts sigma = 2.95 times the trapezoid's and covers
     # proportionally more ground, so the move is longer by (sigma - 1) dv/a (1 - vs/vmax)
     u, g = sigmoid_breakpoints()
     sigma = np.max(np.diff(g) / np.diff(u))
-    vmax, vs, a = f["max_steps_s"], 200, f["accel_steps_s2"]
+    vmax, vs, a = f.max_steps_s, 200, f.accel_steps_s2
     assert sigma == pytest.approx(2.95, abs=0.01)
     assert long_s.duration - long_t.duration == pytest.approx(
         (sigma - 1) * (vmax - vs) / a * (1 - vs / vmax), rel=0.1)

@@ -21,9 +21,9 @@ def names(prof) -> set[tuple[str, int]]:
 
 
 def without_dead(text: str) -> dict:
-    raw = tomllib.loads(text)
-    raw["layout"].pop("dead_nozzles", None)
-    return raw
+    doc = tomllib.loads(text)
+    doc["layout"].pop("dead_nozzles", None)
+    return doc
 
 
 def comments(text: str) -> list[str]:

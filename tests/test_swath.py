@@ -1,7 +1,6 @@
 """The pass planner: every halftone dot is fired exactly once, by a live nozzle, at the
 place the geometry says (property-based over images, modes and profiles)."""
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,6 @@ from wideprint.rip.swath import PASS_COUNTS, PassPlanner
 
 def variant_profile(tmp_dir: Path, dead=(), offsets=None, bidir=None, name="p"):
     text = DEFAULT_PROFILE.read_text()
-    raw = tomllib.loads(text)
     lines = text.splitlines()
     out = []
     for line in lines:
@@ -28,8 +26,8 @@ def variant_profile(tmp_dir: Path, dead=(), offsets=None, bidir=None, name="p"):
     text = "\n".join(out) + "\n"
     if offsets is not None:
         new_heads = ",\n".join(
-            f'  {{ name = "{h["name"]}", color = "{h["color"]}", x_counts = {off}, y_rows = {h["y_rows"]} }}'
-            for h, off in zip(raw["layout"]["heads"], offsets))
+            f'  {{ name = "{h.name}", color = "{h.color}", x_counts = {off}, y_rows = {h.y_rows} }}'
+            for h, off in zip(load_profile().heads, offsets))
         start = text.index("heads = [")
         end = text.index("]\n", start)
         text = text[:start] + "heads = [\n" + new_heads + ",\n" + text[end:]

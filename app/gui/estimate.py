@@ -64,7 +64,7 @@ def pass_time_s(profile: Profile, width_dots: int, dpi: int, passes: int, bidir:
     k = profile.k(dpi)
     v = profile.speed_counts_s(dpi) / cpi * 25.4                     # mm/s
     a = profile.accel_counts_s2() / cpi * 25.4                       # mm/s²
-    vmax = float(profile.raw["carriage"]["max_speed_mm_s"])
+    vmax = profile.carriage.max_speed_mm_s
     ramp = v * v / (2 * a) + 2 * k / cpi * 25.4
     xs = [h.x_counts for h in profile.heads]
     spread = (max(xs) - min(xs)) / cpi * 25.4
@@ -74,9 +74,9 @@ def pass_time_s(profile: Profile, width_dots: int, dpi: int, passes: int, bidir:
     t_ret = 0.0 if bidir else _trapezoid_s(length, vmax, a)
     s0, s1 = profile.usable_slots()
     advance = (s1 - s0) // passes
-    f = profile.raw["feed"]
+    f = profile.feed
     steps = advance * profile.row_um / profile.feed_um_per_step
-    t_feed = _trapezoid_s(steps, float(f["max_steps_s"]), float(f["accel_steps_s2"]))
+    t_feed = _trapezoid_s(steps, f.max_steps_s, f.accel_steps_s2)
     return dict(line_mm=length, width_mm=width, spread_mm=spread, ramp_mm=ramp, speed_mm_s=v,
                 t_line=t_line, t_return=t_ret, t_feed=t_feed, advance_rows=advance,
                 total=t_line + t_ret + t_feed)

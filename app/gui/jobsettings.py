@@ -151,8 +151,8 @@ def printable_width_mm(profile: Profile, paper_mm: float | None = None,
                        margin_mm: float | None = None) -> float:
     """Paper width less both side margins (the job's, else the profile's; the emulator's
     sheet when no paper was measured)."""
-    paper = paper_mm or float(profile.raw["paper"]["default_width_mm"])
-    margin = float(profile.raw["paper"]["margin_mm"] if margin_mm is None else margin_mm)
+    paper = paper_mm or profile.paper.default_width_mm
+    margin = float(profile.paper.margin_mm if margin_mm is None else margin_mm)
     return max(0.0, paper - 2 * margin)
 
 

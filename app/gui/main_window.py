@@ -597,8 +597,8 @@ class MainWindow(QMainWindow):
     def _update_media(self) -> None:
         try:
             prof = cached_profile(self.profile_path(self.defaults))
-            paper = self.paper_mm or float(prof.raw["paper"]["default_width_mm"])
-            self.preview.set_media(paper, float(prof.raw["paper"]["margin_mm"]))
+            paper = self.paper_mm or prof.paper.default_width_mm
+            self.preview.set_media(paper, prof.paper.margin_mm)
         except Exception:  # noqa: BLE001
             pass
 
