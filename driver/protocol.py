@@ -7,6 +7,7 @@ module; the host's retry logic is in driver/link.py and the device's in device_s
 
 from __future__ import annotations
 
+import binascii
 import enum
 import struct
 import zlib
@@ -180,25 +181,10 @@ STATUS_FIRING = 1 << 7
 
 
 # -- CRCs --------------------------------------------------------------------------------
-def _crc16_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-        table.append(crc & 0xFFFF)
-    return table
-
-
-_CRC16 = _crc16_table()
-
-
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor.
-    check("123456789") == 0x29B1."""
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC16[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE (section 2.2): poly 0x1021, init 0xFFFF, no reflection, no final
+    xor; check("123456789") == 0x29B1.  binascii's CRC-CCITT is this CRC given init 0xFFFF."""
+    return binascii.crc_hqx(data, crc)
 
 
 def crc32(data) -> int:
