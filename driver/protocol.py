@@ -17,6 +17,11 @@ import numpy as np
 
 PROTOCOL_VERSION = (1, 0)
 
+# -- section 1: the data channel's USB function ----------------------------------------------
+USB_VID = 0x1209      # pid.codes, the open-hardware vendor id
+USB_PID = 0x5750      # "WP"
+EP_OUT, EP_IN = 0x01, 0x81   # bulk OUT: data blocks; bulk IN: FPGA reports
+
 # -- section 2.1: handshake and framing -------------------------------------------------
 HANDSHAKE_REQUEST = 0x5A   # seed 004: host sends 5AH ...
 HANDSHAKE_REPLY = 0x55     # ... the DSP answers 55H
