@@ -14,7 +14,6 @@ and the host-side printer handle the job talks to.
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 
 from . import protocol as P
@@ -40,12 +39,10 @@ class Device:
 
     def load_head_config(self) -> None:
         digits = self.profile.head_config_digits()
-        packed = P.pack_digits(digits)
         for first in range(0, len(digits), 400):            # 400 digits = 200 bytes a frame
-            self.link.command(P.Op.HEAD_CONFIG_DATA,
-                              struct.pack("<H", first) + packed[first // 2:first // 2 + 200])
-        self.link.command(P.Op.HEAD_CONFIG_LOAD,
-                          struct.pack("<HI", len(digits), P.crc32(packed)))
+            self.link.call(P.Op.HEAD_CONFIG_DATA, first=first, digits=digits[first:first + 400])
+        self.link.call(P.Op.HEAD_CONFIG_LOAD, count=len(digits),
+                       crc=P.crc32(P.pack_digits(digits)))
 
     def close(self) -> None:
         try:

@@ -30,7 +30,6 @@ import os
 import secrets
 import signal
 import stat
-import struct
 import threading
 import time
 import uuid
@@ -643,7 +642,7 @@ class Worker(threading.Thread):
         from . import protocol as P
         dev.connect()
         if dev.link.status().flags & P.FLAG_JOB_OPEN:
-            dev.link.command(P.Op.JOB_END, struct.pack("<I", job_id))
+            dev.link.call(P.Op.JOB_END, job=job_id)
 
     def _finish(self, job: dict, state: str, message: str) -> None:
         self.srv.hot_done(job, state, message)
