@@ -2,17 +2,34 @@
 
 Byte stream in, byte stream out: the 5AH/55H handshake, frames with CRC16, NAK on damaged
 frames, at-most-once execution (a retransmitted SEQ gets the remembered response), and the
-command set.  Motion itself is in printer.py / line.py; this module decodes and checks.
+command set: one handler per opcode, payloads decoded and encoded from the declarations in
+driver/protocol.py.  Motion itself is in printer.py / line.py; this module decodes and checks.
 """
 
 from __future__ import annotations
 
-import struct
+from typing import Callable
 
 from ..driver import protocol as P
 
 FIRMWARE_VERSION = 0x0100
 SERIAL_NUMBER = b"WP3400-EMU-0001"
+
+# Refusals checked before a command runs, each level adding to the one before (2.4):
+FREE = 0         # always executed
+ARMS = 1         # FAULT_ACTIVE while a fault is latched
+MOVES = 2        # ... NOT_ENABLED, BUSY while a line runs
+NEEDS_HOME = 3   # ... NOT_HOMED
+
+_HANDLERS: dict[int, tuple[Callable, int]] = {}
+
+
+def handles(op: P.Op, gate: int = FREE):
+    """Register a Dsp method as the handler of `op` (Klipper's DECL_COMMAND, device side)."""
+    def register(fn):
+        _HANDLERS[op] = (fn, gate)
+        return fn
+    return register
 
 
 class Dsp:
@@ -55,10 +72,7 @@ class Dsp:
         if frame.seq == self.last_seq and self.last_response is not None:
             self.printer.log("retransmission", seq=frame.seq, op=frame.op)
             return self.last_response
-        try:
-            payload = self.execute(frame.op, frame.payload)
-        except struct.error:
-            payload = bytes((P.Result.BAD_LENGTH,))
+        payload = self.execute(frame.op, frame.payload)
         response = P.Frame(frame.seq, P.Kind.RESPONSE, frame.op, payload).encode()
         self.last_seq, self.last_response = frame.seq, response
         self.printer.log("command", seq=frame.seq, op=P.op_name(frame.op),
@@ -67,142 +81,185 @@ class Dsp:
 
     # -- the command set (docs/protocol.md 2.5) ---------------------------------------------
     def execute(self, op: int, payload: bytes) -> bytes:
+        """One command's response payload: refusals in the order below, then the request
+        decoded from its declaration (driver/protocol.py), the handler, and the response
+        encoded from its declaration (data only with OK; an echo repeats the request)."""
+        entry = _HANDLERS.get(op)
+        if entry is None:
+            return bytes((P.Result.UNKNOWN_OPCODE,))
+        handler, gate = entry
+        refused = self._refusal(gate)
+        if refused is not None:
+            return bytes((refused,))
+        try:
+            request = P.decode_request(op, payload)
+        except P.BadLength:
+            return bytes((P.Result.BAD_LENGTH,))
+        fields = request._asdict()
+        out = handler(self, **fields)
+        if isinstance(out, dict):
+            return bytes((P.Result.OK,)) + P.encode_response(op, **out)
+        if isinstance(out, tuple):
+            return bytes((P.Result.OK,)) + P.COMMANDS[op].response.encode_values(out)
+        if out != P.Result.OK:
+            return bytes((out,))
+        echo = P.COMMANDS[op].echo
+        return bytes((P.Result.OK,)) + P.encode_response(op, **(fields if echo else {}))
+
+    def _refusal(self, gate: int) -> P.Result | None:
         pr = self.printer
-        ok = bytes((P.Result.OK,))
-
-        def res(code: P.Result) -> bytes:
-            return bytes((code,))
-
-        def need_empty() -> None:
-            if payload:
-                raise struct.error("no payload expected")
-
-        if op not in P.Op._value2member_map_:
-            return res(P.Result.UNKNOWN_OPCODE)
-        if op == P.Op.IDENTIFY:
-            need_empty()
-            prof = pr.profile
-            modes = sum(1 << i for i, d in enumerate((150, 300, 600)) if d in prof.dpi_modes)
-            return ok + struct.pack(P.IDENTIFY_FMT, *P.PROTOCOL_VERSION, FIRMWARE_VERSION,
-                                    SERIAL_NUMBER, pr.n_heads, prof.nozzles, pr.fpga.fifo_words,
-                                    pr.fpga.pass_buffer_words, pr.fpga.ring_blocks,
-                                    prof.block_fires, modes, prof.counts_per_inch)
-        if op == P.Op.PING:
-            return ok + payload
-        if op == P.Op.GET_STATUS:
-            need_empty()
-            return pr.status().encode()
-        if op == P.Op.READ_REG:
-            (addr,) = struct.unpack("<H", payload)
-            value = pr.fpga.read_reg(addr)
-            if value is None:
-                return res(P.Result.BAD_ARGUMENT)
-            return ok + struct.pack("<HH", addr, value)
-        if op == P.Op.HEAD_STATUS:
-            need_empty()
-            body = b"".join(struct.pack(P.HEAD_STATUS_FMT, int(round(h.temperature_c * 10)),
-                                        int(round(h.piezo_v * 10)),
-                                        int(h.configured) | int(h.overtemp) << 1 |
-                                        int(bool(h.dead)) << 2) for h in pr.heads)
-            return ok + body
-        if op == P.Op.CLEAR_FAULT:
-            need_empty()
-            cleared = pr.fault
-            pr.clear_fault()
-            return ok + bytes((cleared,))
-        if op == P.Op.ESTOP:
-            need_empty()
-            pr.raise_fault(P.Fault.ESTOP)
-            pr.enabled = False
-            return ok
-        if op == P.Op.STOP:
-            need_empty()
-            pr.stop_motion()
-            return ok
-        if op == P.Op.SET_BAUD:
-            (baud,) = struct.unpack("<I", payload)
-            if baud not in P.SUPPORTED_BAUDS:
-                return res(P.Result.BAD_ARGUMENT)
-            pr.baud = baud
-            return ok + payload
-        if op == P.Op.HEAD_CONFIG_DATA:
-            (first,) = struct.unpack_from("<H", payload)
-            digits = [d for b in payload[2:] for d in (b & 0x0F, b >> 4)]
-            if first == 0:
-                self.config_digits = []
-            if first != len(self.config_digits) or first + len(digits) > 1022:
-                return res(P.Result.BAD_ARGUMENT)
-            self.config_digits += digits
-            return ok + struct.pack("<H", len(self.config_digits))
-        if op == P.Op.HEAD_CONFIG_LOAD:
-            count, crc = struct.unpack("<HI", payload)
-            digits = self.config_digits[:count]
-            if len(digits) != count or P.crc32(P.pack_digits(digits)) != crc:
-                return res(P.Result.CONFIG_CRC)
+        if gate >= ARMS and pr.fault != P.Fault.NONE:
+            return P.Result.FAULT_ACTIVE
+        if gate >= MOVES:
+            if not pr.enabled:
+                return P.Result.NOT_ENABLED
             if pr.busy():
-                return res(P.Result.BUSY)
-            pr.load_head_config(digits)
-            return ok + payload
+                return P.Result.BUSY
+        if gate >= NEEDS_HOME and not pr.homed:
+            return P.Result.NOT_HOMED
+        return None
 
-        # everything below moves or arms something: refused while a fault is latched
-        if pr.fault != P.Fault.NONE:
-            return res(P.Result.FAULT_ACTIVE)
-        if op == P.Op.WRITE_REG:
-            addr, value = struct.unpack("<HH", payload)
-            if addr == P.REG_WE_EN and value == 1 and not pr.heads_configured():
-                pr.raise_fault(P.Fault.HEAD_CONFIG)
-                return res(P.Result.HEADS_NOT_CONFIGURED)
-            if not pr.fpga.write_reg(addr, value):
-                return res(P.Result.BAD_ARGUMENT)
-            pr.log("register", addr=f"{addr:04X}", value=value)
-            return ok + payload
-        if op == P.Op.ENABLE:
-            (on,) = struct.unpack("<B", payload)
-            if on not in (0, 1):
-                return res(P.Result.BAD_ARGUMENT)
-            pr.enabled = bool(on)
-            return ok + payload
-        if op == P.Op.JOB_BEGIN:
-            fields = struct.unpack(P.JOB_BEGIN_FMT, payload)
-            pr.job_begin(*fields)
-            return ok + payload
-        if op == P.Op.JOB_END:
-            (job,) = struct.unpack("<I", payload)
-            pr.job_end(job)
-            return ok + payload
-        # motion commands
-        if not pr.enabled:
-            return res(P.Result.NOT_ENABLED)
+    # Handlers get the request's declared fields by name and return a Result (with OK an
+    # echoed command echoes, others answer their empty layout) or the response fields: a
+    # dict by name or a tuple in declared order.
+    @handles(P.Op.IDENTIFY)
+    def identify(self):
+        pr = self.printer
+        prof = pr.profile
+        major, minor = P.PROTOCOL_VERSION
+        modes = sum(1 << i for i, d in enumerate((150, 300, 600)) if d in prof.dpi_modes)
+        return dict(proto_major=major, proto_minor=minor, firmware=FIRMWARE_VERSION,
+                    serial=SERIAL_NUMBER, heads=pr.n_heads, nozzles=prof.nozzles,
+                    fifo_words=pr.fpga.fifo_words, pass_buffer_words=pr.fpga.pass_buffer_words,
+                    ring_blocks=pr.fpga.ring_blocks, block_fires=prof.block_fires,
+                    dpi_mask=modes, counts_per_inch=prof.counts_per_inch)
+
+    @handles(P.Op.PING)
+    def ping(self, data):
+        return P.Result.OK
+
+    @handles(P.Op.GET_STATUS)
+    def get_status(self):
+        return self.printer.status().response_values()
+
+    @handles(P.Op.READ_REG)
+    def read_reg(self, addr):
+        value = self.printer.fpga.read_reg(addr)
+        if value is None:
+            return P.Result.BAD_ARGUMENT
+        return dict(addr=addr, value=value)
+
+    @handles(P.Op.HEAD_STATUS)
+    def head_status(self):
+        return dict(heads=[(int(round(h.temperature_c * 10)), int(round(h.piezo_v * 10)),
+                            int(h.configured) | int(h.overtemp) << 1 | int(bool(h.dead)) << 2)
+                           for h in self.printer.heads])
+
+    @handles(P.Op.CLEAR_FAULT)
+    def clear_fault(self):
+        cleared = self.printer.fault
+        self.printer.clear_fault()
+        return dict(fault=cleared)
+
+    @handles(P.Op.ESTOP)
+    def estop(self):
+        self.printer.raise_fault(P.Fault.ESTOP)
+        self.printer.enabled = False
+        return P.Result.OK
+
+    @handles(P.Op.STOP)
+    def stop(self):
+        self.printer.stop_motion()
+        return P.Result.OK
+
+    @handles(P.Op.SET_BAUD)
+    def set_baud(self, baud):
+        if baud not in P.SUPPORTED_BAUDS:
+            return P.Result.BAD_ARGUMENT
+        self.printer.baud = baud
+        return P.Result.OK
+
+    @handles(P.Op.HEAD_CONFIG_DATA)
+    def head_config_data(self, first, digits):
+        if first == 0:
+            self.config_digits = []
+        if first != len(self.config_digits) or first + len(digits) > 1022:
+            return P.Result.BAD_ARGUMENT
+        self.config_digits += digits
+        return dict(held=len(self.config_digits))
+
+    @handles(P.Op.HEAD_CONFIG_LOAD)
+    def head_config_load(self, count, crc):
+        pr = self.printer
+        digits = self.config_digits[:count]
+        if len(digits) != count or P.crc32(P.pack_digits(digits)) != crc:
+            return P.Result.CONFIG_CRC
         if pr.busy():
-            return res(P.Result.BUSY)
-        if op == P.Op.HOME:
-            need_empty()
-            pr.home()
-            return ok
-        if not pr.homed:
-            return res(P.Result.NOT_HOMED)
-        if op == P.Op.MEASURE_PAPER:
-            need_empty()
-            pr.measure_paper()
-            return ok
-        if op == P.Op.GET_PAPER:
-            need_empty()
-            return ok + struct.pack(P.PAPER_FMT, int(pr.paper_present()), *pr.paper_edges)
-        if op == P.Op.PARK:
-            need_empty()
-            return res(pr.park())
-        if op == P.Op.FEED:
-            steps, profile, vmax, acc = struct.unpack(P.FEED_FMT, payload)
-            if profile not in (0, 1) or vmax == 0 or acc == 0:
-                return res(P.Result.BAD_ARGUMENT)
-            code = pr.feed(steps, profile, vmax, acc)
-            return bytes((code,)) + (payload if code == P.Result.OK else b"")
-        if op == P.Op.SET_LINE:
-            fields = struct.unpack(P.SET_LINE_FMT, payload)
-            code = pr.set_line(*fields)
-            return bytes((code,)) + (payload if code == P.Result.OK else b"")
-        if op == P.Op.START_LINE:
-            need_empty()
-            code = pr.start_line()
-            return bytes((code,)) + (struct.pack("<I", pr.fpga.pass_id) if code == P.Result.OK else b"")
-        return res(P.Result.UNKNOWN_OPCODE)
+            return P.Result.BUSY
+        pr.load_head_config(digits)
+        return P.Result.OK
+
+    # everything below moves or arms something: refused while a fault is latched
+    @handles(P.Op.WRITE_REG, ARMS)
+    def write_reg(self, addr, value):
+        pr = self.printer
+        if addr == P.REG_WE_EN and value == 1 and not pr.heads_configured():
+            pr.raise_fault(P.Fault.HEAD_CONFIG)
+            return P.Result.HEADS_NOT_CONFIGURED
+        if not pr.fpga.write_reg(addr, value):
+            return P.Result.BAD_ARGUMENT
+        pr.log("register", addr=f"{addr:04X}", value=value)
+        return P.Result.OK
+
+    @handles(P.Op.ENABLE, ARMS)
+    def enable(self, on):
+        if on not in (0, 1):
+            return P.Result.BAD_ARGUMENT
+        self.printer.enabled = bool(on)
+        return P.Result.OK
+
+    @handles(P.Op.JOB_BEGIN, ARMS)
+    def job_begin(self, job, x0, width, height, dpi, row_nm, y0):
+        self.printer.job_begin(job, x0, width, height, dpi, row_nm, y0)
+        return P.Result.OK
+
+    @handles(P.Op.JOB_END, ARMS)
+    def job_end(self, job):
+        self.printer.job_end(job)
+        return P.Result.OK
+
+    # motion commands: also refused when not enabled or busy
+    @handles(P.Op.HOME, MOVES)
+    def home(self):
+        self.printer.home()
+        return P.Result.OK
+
+    # and when not homed
+    @handles(P.Op.MEASURE_PAPER, NEEDS_HOME)
+    def measure_paper(self):
+        self.printer.measure_paper()
+        return P.Result.OK
+
+    @handles(P.Op.GET_PAPER, NEEDS_HOME)
+    def get_paper(self):
+        left, right = self.printer.paper_edges
+        return dict(present=int(self.printer.paper_present()), left=left, right=right)
+
+    @handles(P.Op.PARK, NEEDS_HOME)
+    def park(self):
+        return self.printer.park()
+
+    @handles(P.Op.FEED, NEEDS_HOME)
+    def feed(self, steps, profile, max_rate, accel):
+        if profile not in (0, 1) or max_rate == 0 or accel == 0:
+            return P.Result.BAD_ARGUMENT
+        return self.printer.feed(steps, profile, max_rate, accel)
+
+    @handles(P.Op.SET_LINE, NEEDS_HOME)
+    def set_line(self, pass_id, direction, dpi, fire_start, fire_count, speed, accel):
+        return self.printer.set_line(pass_id, direction, dpi, fire_start, fire_count, speed, accel)
+
+    @handles(P.Op.START_LINE, NEEDS_HOME)
+    def start_line(self):
+        code = self.printer.start_line()
+        return dict(pass_id=self.printer.fpga.pass_id) if code == P.Result.OK else code

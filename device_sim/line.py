@@ -18,7 +18,8 @@ import numpy as np
 
 from ..driver import protocol as P
 from .head import serial_order
-from .motion import ServoMove, ramp_counts
+from .motion import ramp_counts
+from .servo import ServoMove
 
 
 class LineRun:

@@ -26,8 +26,8 @@ from .fpga import Fpga
 from .head import Head
 from .line import LineRun
 from .media import Media
-from .motion import ServoMove, Trapezoid, ramp_counts
-from .servo import ServoParams
+from .motion import Trapezoid, ramp_counts
+from .servo import ServoMove, ServoParams
 from .stepper import feed_move
 
 PCI_BYTES_S = 60e6           # effective PLX9054 DMA rate (33 MHz, 32 bit, with overhead)

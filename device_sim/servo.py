@@ -499,3 +499,28 @@ def simulate_move(params: ServoParams, start_counts: float, end_counts: float, v
                       max_following_error=fe, start=float(start_counts),
                       target=float(end_counts), move_duration=move.duration, period_s=T,
                       u=out_u, x_ref=x_ref)
+
+
+class ServoMove:
+    """A carriage move as the DSP's servo actually runs it (simulate_move): the same
+    interface as motion.Trapezoid, but times and positions come from the simulated motor, so fire
+    times carry the servo's real speed ripple and the move ends where the motor stopped."""
+
+    def __init__(self, params, start: float, end: float, v: float, a: float):
+        self.start, self.end, self.v, self.a = float(start), float(end), v, a
+        self.traj = simulate_move(params, start, end, v, a)
+        self.sign = 1 if end >= start else -1
+        self.duration = float(self.traj.stop_time())
+        self.final = float(self.traj.final_position)
+
+    def time_at(self, positions: np.ndarray) -> np.ndarray:
+        t = self.traj.crossing_times(np.asarray(positions, dtype=np.float64), self.sign > 0)
+        if np.isnan(t).any():
+            raise ValueError("the servo never reached a fire position")
+        return t
+
+    def position_at(self, t: float) -> float:
+        return float(np.interp(t, self.traj.t, self.traj.x))
+
+    def speed_at(self, t: float) -> float:
+        return float(np.interp(t, self.traj.t, self.traj.v))

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import usb.backend
 import usb.core
 
-from ..driver.transport import EP_IN, EP_OUT, USB_PID, USB_VID
+from ..driver.protocol import EP_IN, EP_OUT, USB_PID, USB_VID
 
 STRINGS = {1: "wideprint", 2: "WP-3400 print data (emulated)", 3: "WP3400-EMU-0001"}
 LANGID_EN_US = 0x0409

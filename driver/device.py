@@ -14,7 +14,6 @@ in app/devices.py; the driver only knows the links and what timing a device need
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 
 from . import protocol as P
@@ -56,12 +55,10 @@ class Device:
 
     def load_head_config(self) -> None:
         digits = self.profile.head_config_digits()
-        packed = P.pack_digits(digits)
         for first in range(0, len(digits), 400):            # 400 digits = 200 bytes a frame
-            self.link.command(P.Op.HEAD_CONFIG_DATA,
-                              struct.pack("<H", first) + packed[first // 2:first // 2 + 200])
-        self.link.command(P.Op.HEAD_CONFIG_LOAD,
-                          struct.pack("<HI", len(digits), P.crc32(packed)))
+            self.link.call(P.Op.HEAD_CONFIG_DATA, first=first, digits=digits[first:first + 400])
+        self.link.call(P.Op.HEAD_CONFIG_LOAD, count=len(digits),
+                       crc=P.crc32(P.pack_digits(digits)))
 
     def close(self) -> None:
         try:

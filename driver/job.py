@@ -8,7 +8,6 @@ START_LINE, stream on FIFO demand, wait for LINE_DONE, WE_EN off -> park -> repo
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 import time
 from dataclasses import dataclass, field
@@ -169,13 +168,10 @@ class PrintJob:
 
     def _read_head_temps(self) -> None:
         try:
-            raw = self.dev.link.command(P.Op.HEAD_STATUS)
+            heads = self.dev.link.head_status()
         except (LinkError, DeviceError):
             return
-        size = struct.calcsize(P.HEAD_STATUS_FMT)
-        self.telemetry.head_temps_c = tuple(
-            struct.unpack_from(P.HEAD_STATUS_FMT, raw, i * size)[0] / 10
-            for i in range(len(raw) // size))
+        self.telemetry.head_temps_c = tuple(h.temperature / 10 for h in heads)
 
     # -- device steps ---------------------------------------------------------------------
     def _wait(self, done, what: str, timeout: float = 120.0) -> P.Status:
@@ -201,7 +197,7 @@ class PrintJob:
             self._state("connecting", "loading head configuration")
             self.dev.load_head_config()
         if not st.flags & P.FLAG_ENABLED:
-            link.command(P.Op.ENABLE, b"\x01")
+            link.call(P.Op.ENABLE, on=1)
         if not st.flags & P.FLAG_HOMED:
             self._state("connecting", "homing")
             link.command(P.Op.HOME)
@@ -217,7 +213,7 @@ class PrintJob:
         """x0: encoder count of image column 0 on the measured paper, from the placement's
         side margins, alignment and offset (docs/placement.md, "Position on the paper");
         refuses a job that does not fit, before anything prints."""
-        present, left, right = struct.unpack(P.PAPER_FMT, self.dev.link.command(P.Op.GET_PAPER))
+        present, left, right = self.dev.link.paper()
         if not present:
             raise JobError("no paper loaded", P.Fault.PAPER_OUT)
         prof = self.profile
@@ -267,8 +263,8 @@ class PrintJob:
         if delta:
             f = self.profile.feed
             prof = 1 if f.profile == "sigmoid" else 0
-            link.command(P.Op.FEED, struct.pack(P.FEED_FMT, delta, prof, int(f.max_steps_s),
-                                                int(f.accel_steps_s2)))
+            link.call(P.Op.FEED, steps=delta, profile=prof, max_rate=int(f.max_steps_s),
+                      accel=int(f.accel_steps_s2))
             st = self._wait(lambda s: s.motion == P.Motion.IDLE, "feeding paper")
         if st.paper_steps != target_steps:
             raise JobError(f"paper is at step {st.paper_steps}, expected {target_steps}: "
@@ -337,8 +333,8 @@ class PrintJob:
             streamer.resume()                       # the line is running or starved: feed it
         else:
             speed, accel = self.line_speed(), prof.accel_counts_s2()
-            link.command(P.Op.SET_LINE, struct.pack(P.SET_LINE_FMT, pd.index, pd.direction,
-                                                    dpi, first, pd.fires, speed, accel))
+            link.call(P.Op.SET_LINE, pass_id=pd.index, direction=pd.direction, dpi=dpi,
+                      fire_start=first, fire_count=pd.fires, speed=speed, accel=accel)
             link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
             link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
             link.write_reg(P.REG_WE_EN, 1)
@@ -398,9 +394,9 @@ class PrintJob:
             rep.passes_total = self.telemetry.passes_total = planner.total_passes
             link = self.dev.link
             top = self.top_rows()                # the top margin: image row 0 that much later
-            begin = struct.pack(P.JOB_BEGIN_FMT, self.job_id, x0, rip.width, rip.height,
-                                rip.settings.dpi, prof.row_nm, planner.y0_rows + top)
-            self._recovering(lambda: link.command(P.Op.JOB_BEGIN, begin), "starting the job")
+            begin = dict(job=self.job_id, x0=x0, width=rip.width, height=rip.height,
+                         dpi=rip.settings.dpi, row_nm=prof.row_nm, y0=planner.y0_rows + top)
+            self._recovering(lambda: link.call(P.Op.JOB_BEGIN, **begin), "starting the job")
             paper0 = self.resume["paper0"] if self.resume else self._recovering(
                 lambda: link.status().paper_steps, "reading the paper position")
             next_pass = self.resume["next_pass"] if self.resume else 0
@@ -429,7 +425,7 @@ class PrintJob:
             out = paper0 + prof.feed_steps_for_rows(
                 planner.top_row(planner.total_passes - 1) - top0 + prof.swath_rows)
             self._recovering(lambda: self.feed_to(out), "feeding the job out")
-            self._recovering(lambda: link.command(P.Op.JOB_END, struct.pack("<I", self.job_id)),
+            self._recovering(lambda: link.call(P.Op.JOB_END, job=self.job_id),
                              "ending the job")
             self._recovering(lambda: link.command(P.Op.PARK), "parking")
             rep.passes_skipped = rep.passes_total - rep.passes_printed

@@ -1,20 +1,16 @@
 """The command channel, host side (docs/protocol.md section 2): handshake, framing,
-stop-and-wait with at most 3 tries per frame (seed 004), parameter echo checks."""
+stop-and-wait with at most 3 tries per frame (seed 004), parameter echo checks.  Payloads
+are encoded and decoded from the declarations in driver/protocol.py (section 2.5)."""
 
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 import time
 
 from . import protocol as P
 
 log = logging.getLogger("wideprint.link")
-
-# commands whose response must echo the command payload (docs/protocol.md 2.3)
-ECHOED = {P.Op.SET_LINE, P.Op.FEED, P.Op.WRITE_REG, P.Op.JOB_BEGIN, P.Op.JOB_END,
-          P.Op.ENABLE, P.Op.SET_BAUD, P.Op.HEAD_CONFIG_LOAD}
 
 
 class LinkError(ConnectionError):
@@ -68,8 +64,18 @@ class CommandLink:
                     break
         raise LinkError(f"no printer answered the handshake on {getattr(self.port, 'port', self.port)}")
 
+    def call(self, op: P.Op, **fields):
+        """Send one command encoded from its declaration, return the decoded response
+        record (docs/protocol.md 2.5); an echo is checked against what was sent (2.3)."""
+        data = self.command(op, P.encode_request(op, **fields))
+        try:
+            return P.decode_response(op, data)
+        except P.BadLength as exc:
+            raise LinkError(f"{P.op_name(op)}: malformed answer: {exc}") from None
+
     def command(self, op: P.Op, payload: bytes = b"") -> bytes:
-        """Send one command, return the response data after the result byte."""
+        """Send one command as raw payload bytes, return the response data after the
+        result byte (echo checked)."""
         with self._lock:
             return self._command(op, payload)
 
@@ -88,7 +94,8 @@ class CommandLink:
             result, data = resp.payload[0], resp.payload[1:]
             if result != P.Result.OK:
                 raise DeviceError(op, result)
-            if op in ECHOED and data[:len(payload)] != payload:
+            cmd = P.COMMANDS.get(op)
+            if cmd is not None and cmd.echo and data != payload:
                 raise LinkError(f"{P.op_name(op)}: the printer echoed different parameters")
             return data
         raise LinkError(f"{P.op_name(op)}: no valid answer after {self.tries} tries")
@@ -115,25 +122,27 @@ class CommandLink:
                 self.decoder.reset()
                 return None
 
-    # -- typed helpers ----------------------------------------------------------------------
+    # -- typed helpers: thin wrappers over call() ----------------------------------------
     def identify(self) -> dict:
-        v = struct.unpack(P.IDENTIFY_FMT, self.command(P.Op.IDENTIFY))
-        keys = ("proto_major", "proto_minor", "firmware", "serial", "heads", "nozzles",
-                "fifo_words", "pass_buffer_words", "ring_blocks", "block_fires", "dpi_mask",
-                "counts_per_inch")
-        info = dict(zip(keys, v))
-        info["serial"] = info["serial"].rstrip(b"\0").decode("ascii", "replace")
+        info = self.call(P.Op.IDENTIFY)._asdict()
         if info["proto_major"] != P.PROTOCOL_VERSION[0]:
             raise LinkError(f"printer speaks protocol {info['proto_major']}.{info['proto_minor']}, "
                             f"this host {P.PROTOCOL_VERSION[0]}.{P.PROTOCOL_VERSION[1]}")
         return info
 
     def status(self) -> P.Status:
-        return P.Status.decode(bytes((P.Result.OK,)) + self.command(P.Op.GET_STATUS))
+        return P.Status(P.Result.OK, *self.call(P.Op.GET_STATUS))
 
     def write_reg(self, addr: int, value: int) -> None:
-        self.command(P.Op.WRITE_REG, struct.pack("<HH", addr, value))
+        self.call(P.Op.WRITE_REG, addr=addr, value=value)
 
     def read_reg(self, addr: int) -> int:
-        a, v = struct.unpack("<HH", self.command(P.Op.READ_REG, struct.pack("<H", addr)))
-        return v
+        return self.call(P.Op.READ_REG, addr=addr).value
+
+    def head_status(self) -> tuple:
+        """One record per head: temperature (0.1 °C), piezo (0.1 V), flags."""
+        return self.call(P.Op.HEAD_STATUS).heads
+
+    def paper(self):
+        """GET_PAPER: (present, left, right), edges in encoder counts."""
+        return self.call(P.Op.GET_PAPER)

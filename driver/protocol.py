@@ -1,20 +1,32 @@
 """The wire protocol shared by the host driver and the emulator (docs/protocol.md).
 
-Only constants and pure codecs live here: frames of the command channel (section 2),
-blocks and reports of the data channel (section 3).  Neither side keeps state in this
-module; the host's retry logic is in driver/link.py and the device's in device_sim/dsp.py.
+Only constants, the declaration of every command's payloads and pure codecs live here:
+frames of the command channel (section 2), blocks and reports of the data channel
+(section 3), the USB identity (section 1).  Neither side keeps state in this module; the
+host's retry logic is in driver/link.py and the device's in device_sim/dsp.py.  This is the
+seam between them: it imports nothing from wideprint (tests/test_layers.py).
 """
 
 from __future__ import annotations
 
+import binascii
 import enum
+import operator
+import re
 import struct
 import zlib
-from dataclasses import dataclass
+from collections import namedtuple
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 PROTOCOL_VERSION = (1, 0)
+
+# -- section 1: the data channel's USB function ----------------------------------------------
+USB_VID = 0x1209      # pid.codes, the open-hardware vendor id
+USB_PID = 0x5750      # "WP"
+EP_OUT, EP_IN = 0x01, 0x81   # bulk OUT: data blocks; bulk IN: FPGA reports
 
 # -- section 2.1: handshake and framing -------------------------------------------------
 HANDSHAKE_REQUEST = 0x5A   # seed 004: host sends 5AH ...
@@ -180,25 +192,10 @@ STATUS_FIRING = 1 << 7
 
 
 # -- CRCs --------------------------------------------------------------------------------
-def _crc16_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-        table.append(crc & 0xFFFF)
-    return table
-
-
-_CRC16 = _crc16_table()
-
-
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor.
-    check("123456789") == 0x29B1."""
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC16[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE (section 2.2): poly 0x1021, init 0xFFFF, no reflection, no final
+    xor; check("123456789") == 0x29B1.  binascii's CRC-CCITT is this CRC given init 0xFFFF."""
+    return binascii.crc_hqx(data, crc)
 
 
 def crc32(data) -> int:
@@ -269,18 +266,247 @@ class FrameDecoder:
         self._buf.clear()
 
 
-# -- command payloads (section 2.5) ------------------------------------------------------
-IDENTIFY_FMT = "<BBH16sBBHIBHBH"   # see docs/protocol.md 2.5 IDENTIFY
-STATUS_FMT = "<BHBiiiIIBBIiB8H"    # see docs/protocol.md 2.5 GET_STATUS
-SET_LINE_FMT = "<IBHiIII"          # pass, dir, dpi, fire_start, fire_count, speed, accel
-FEED_FMT = "<iBII"                 # steps, profile, max steps/s, accel steps/s^2
-JOB_BEGIN_FMT = "<IiIIHIi"         # job, x0 counts, width cols, height rows, dpi, row nm, y0 rows
-PAPER_FMT = "<Bii"                 # present, left counts, right counts
-HEAD_STATUS_FMT = "<hHB"           # per head: temp 0.1 C, piezo 0.1 V, flags
+# -- command payloads (section 2.5): declared once, encoded and decoded from here by both sides --
+# A layout is a list of `name:type` fields in wire order, little-endian (docs/protocol.md 2.5):
+#   u8 u16 u32 i8 i16 i32    one integer          T[N]       N integers, a tuple
+#   ascii[N]  N bytes of ASCII, NUL padded, a str
+# and, as the last field only, the rest of the payload:
+#   bytes     raw bytes      nibbles   hex digits two per byte, low nibble first, a tuple
+#   {layout}[]  repeated records (e.g. one per head), a tuple of records
+_SCALAR = {"u8": "B", "u16": "H", "u32": "I", "i8": "b", "i16": "h", "i32": "i"}
+_FIELD = re.compile(r"\s*(\w+):(\{[^{}]*\}\[\]|\S+)")
+_ARRAY = re.compile(r"(u8|u16|u32|i8|i16|i32|ascii)\[(\d+)\]")
+
+
+class LayoutError(ValueError):
+    """Fields that do not fit a declared layout (a missing or unknown field, a value out of
+    its type's range)."""
+
+
+class BadLength(LayoutError):
+    """A payload whose length is wrong for its declared layout (the DSP answers BAD_LENGTH)."""
+
+
+class Layout:
+    """One declared payload layout: `decode(bytes) -> record`, `encode(**fields) -> bytes`.
+    Records are namedtuples with the declared field names."""
+
+    def __init__(self, spec: str, typename: str):
+        self.spec = " ".join(spec.split())
+        self.fields: list[tuple[str, str, int]] = []     # (name, kind, count)
+        self.tail: str | None = None                      # "bytes" | "nibbles" | "group"
+        self.group: Layout | None = None
+        fmt = "<"
+        pos = 0
+        spec = spec.strip()
+        while pos < len(spec):
+            m = _FIELD.match(spec, pos)
+            if not m:
+                raise ValueError(f"layout {spec!r}: cannot parse at {spec[pos:]!r}")
+            pos = m.end()
+            name, typ = m.groups()
+            if self.tail is not None:
+                raise ValueError(f"layout {spec!r}: only the last field may take the rest")
+            arr = _ARRAY.fullmatch(typ)
+            if typ in _SCALAR:
+                self.fields.append((name, "int", 1))
+                fmt += _SCALAR[typ]
+            elif arr and arr.group(1) == "ascii":
+                self.fields.append((name, "ascii", int(arr.group(2))))
+                fmt += arr.group(2) + "s"
+            elif arr:
+                self.fields.append((name, "array", int(arr.group(2))))
+                fmt += _SCALAR[arr.group(1)] * int(arr.group(2))
+            elif typ in ("bytes", "nibbles"):
+                self.fields.append((name, typ, 0))
+                self.tail = typ
+            elif typ.startswith("{"):
+                item = name[:-1] if name.endswith("s") else name     # heads -> Head
+                self.group = Layout(typ[1:-3], item.title().replace("_", ""))
+                if self.group.tail is not None or any(k != "int" for _, k, _ in self.group.fields):
+                    raise ValueError(f"layout {spec!r}: a repeated record holds integers only")
+                self.fields.append((name, "group", 0))
+                self.tail = "group"
+            else:
+                raise ValueError(f"layout {spec!r}: unknown type {typ!r}")
+        self.names = tuple(name for name, _, _ in self.fields)
+        self.record = namedtuple(typename, self.names)
+        self.struct = struct.Struct(fmt)
+        self.size = self.struct.size        # of the fixed part; the tail adds to it
+        self._keys = frozenset(self.names)
+        self._plain = all(kind == "int" for _, kind, _ in self.fields)
+        # decoding plan: runs of integers are sliced in one go
+        self._plan: list[tuple[str, int, int]] = []
+        i = 0
+        for _, kind, count in self.fields:
+            width = {"int": 1, "array": count, "ascii": 1}.get(kind, 0)
+            if kind == "int" and self._plan and self._plan[-1][0] == "int":
+                self._plan[-1] = ("int", self._plan[-1][1], i + 1)
+            else:
+                self._plan.append((kind, i, i + width))
+            i += width
+
+    def __repr__(self) -> str:
+        return f"Layout({self.spec!r})"
+
+    # -- bytes -> record -------------------------------------------------------------------
+    def decode(self, data: bytes):
+        return self.record._make(self.decode_values(data))
+
+    def decode_values(self, data: bytes) -> tuple | list:
+        """The field values in declaration order; BadLength when the length does not fit."""
+        n = len(data)
+        if self.tail is None:
+            if n != self.size:
+                raise BadLength(f"{n} bytes, {self.record.__name__} has {self.size}")
+        elif n < self.size or (self.tail == "group" and (n - self.size) % self.group.size):
+            raise BadLength(f"{n} bytes do not fit {self.record.__name__} ({self.spec})")
+        values = self.struct.unpack_from(data)
+        if self._plain:                     # the common case: integers only
+            return values
+        out = []
+        for kind, i, j in self._plan:
+            if kind == "int":
+                out += values[i:j]
+            elif kind == "array":
+                out.append(values[i:j])
+            elif kind == "ascii":
+                out.append(values[i].rstrip(b"\0").decode("ascii", "replace"))
+            elif kind == "bytes":
+                out.append(bytes(data[self.size:]))
+            elif kind == "nibbles":
+                out.append(tuple(d for b in data[self.size:] for d in (b & 0x0F, b >> 4)))
+            else:
+                g = self.group
+                out.append(tuple(map(g.record._make, g.struct.iter_unpack(data[self.size:]))))
+        return out
+
+    # -- fields -> bytes -------------------------------------------------------------------
+    def encode(self, **values) -> bytes:
+        if values.keys() != self._keys:
+            missing = [k for k in self.names if k not in values]
+            extra = [k for k in values if k not in self._keys]
+            raise LayoutError(f"{self.record.__name__}: missing {missing}, unknown {extra}")
+        return self._pack([values[k] for k in self.names])
+
+    def encode_values(self, values) -> bytes:
+        """Encode from values in declaration order (a record or a tuple)."""
+        values = list(values)
+        if len(values) != len(self.names):
+            raise LayoutError(f"{self.record.__name__}: {len(values)} values for {self.names}")
+        return self._pack(values)
+
+    def _pack(self, values: list) -> bytes:
+        tail = b""
+        if not self._plain:
+            flat = []
+            for (name, kind, count), v in zip(self.fields, values):
+                if kind == "int":
+                    flat.append(v)
+                elif kind == "array":
+                    if len(v) != count:
+                        raise LayoutError(f"{name}: {len(v)} values, the layout has {count}")
+                    flat += v
+                elif kind == "ascii":
+                    raw = v.encode("ascii") if isinstance(v, str) else bytes(v)
+                    if len(raw) > count:
+                        raise LayoutError(f"{name}: {len(raw)} bytes, the layout has {count}")
+                    flat.append(raw)
+                elif kind == "bytes":
+                    tail = bytes(v)
+                elif kind == "nibbles":
+                    if any(not 0 <= d <= 15 for d in v):
+                        raise LayoutError(f"{name}: a digit is not 0..15")
+                    tail = pack_digits(list(v))
+                else:
+                    g = self.group
+                    tail = b"".join(g.encode(**r) if isinstance(r, Mapping) else g.encode_values(r)
+                                    for r in v)
+            values = flat
+        try:
+            return self.struct.pack(*values) + tail
+        except struct.error as exc:
+            raise LayoutError(f"{self.record.__name__}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Command:
+    """One opcode's declaration: its request layout, its response layout (the data after
+    the result byte, sent only with result OK), and whether the response echoes the request
+    (section 2.3: the host compares the echo with what it sent)."""
+    op: Op
+    request: Layout
+    response: Layout
+    echo: bool = False
+
+
+COMMANDS: dict[int, Command] = {}
+
+
+def decl(op: Op, request: str = "", response: str = "", echo: bool = False) -> Command:
+    stem = "".join(w.title() for w in op.name.split("_"))
+    if echo and response:
+        raise ValueError(f"{op.name}: an echoed response has the request's layout")
+    req = Layout(request, stem if echo else stem + "Request")
+    cmd = Command(op, req, req if echo else Layout(response, stem + "Response"), echo)
+    COMMANDS[op] = cmd
+    return cmd
+
+
+# The table (docs/protocol.md 2.5 has the same layouts with their meaning; tests check both).
+decl(Op.IDENTIFY, response="proto_major:u8 proto_minor:u8 firmware:u16 serial:ascii[16] "
+     "heads:u8 nozzles:u8 fifo_words:u16 pass_buffer_words:u32 ring_blocks:u8 block_fires:u16 "
+     "dpi_mask:u8 counts_per_inch:u16")
+decl(Op.SET_BAUD, request="baud:u32", echo=True)
+decl(Op.ENABLE, request="on:u8", echo=True)
+decl(Op.HOME)
+decl(Op.MEASURE_PAPER)
+decl(Op.GET_PAPER, response="present:u8 left:i32 right:i32")
+decl(Op.SET_LINE, request="pass_id:u32 direction:u8 dpi:u16 fire_start:i32 fire_count:u32 "
+     "speed:u32 accel:u32", echo=True)
+decl(Op.START_LINE, response="pass_id:u32")
+decl(Op.FEED, request="steps:i32 profile:u8 max_rate:u32 accel:u32", echo=True)
+decl(Op.WRITE_REG, request="addr:u16 value:u16", echo=True)
+decl(Op.READ_REG, request="addr:u16", response="addr:u16 value:u16")
+decl(Op.HEAD_CONFIG_DATA, request="first:u16 digits:nibbles", response="held:u16")
+decl(Op.HEAD_CONFIG_LOAD, request="count:u16 crc:u32", echo=True)
+decl(Op.HEAD_STATUS, response="heads:{temperature:i16 piezo:u16 flags:u8}[]")
+decl(Op.GET_STATUS, response="flags:u16 motion:u8 carriage:i32 speed:i32 paper_steps:i32 "
+     "pass_id:u32 fires_done:u32 fault:u8 fault_head:u8 fault_pass:u32 fault_column:i32 "
+     "ring_free:u8 fifo:u16[8]")
+decl(Op.STOP)
+decl(Op.ESTOP)
+decl(Op.CLEAR_FAULT, response="fault:u8")
+decl(Op.PARK)
+decl(Op.JOB_BEGIN, request="job:u32 x0:i32 width:u32 height:u32 dpi:u16 row_nm:u32 y0:i32",
+     echo=True)
+decl(Op.JOB_END, request="job:u32", echo=True)
+decl(Op.PING, request="data:bytes", echo=True)
+
+
+def encode_request(op: int, **values) -> bytes:
+    return COMMANDS[op].request.encode(**values)
+
+
+def decode_request(op: int, payload: bytes):
+    """Raises BadLength when the payload does not fit (section 2.4 BAD_LENGTH)."""
+    return COMMANDS[op].request.decode(payload)
+
+
+def encode_response(op: int, **values) -> bytes:
+    """The response data after the result byte (section 2.4)."""
+    return COMMANDS[op].response.encode(**values)
+
+
+def decode_response(op: int, data: bytes):
+    """`data`: the response payload after the result byte."""
+    return COMMANDS[op].response.decode(data)
 
 
 @dataclass(frozen=True)
 class Status:
+    """The GET_STATUS payload, result byte included: the result, then the fields declared
+    for GET_STATUS's response (checked below)."""
     result: int
     flags: int
     motion: int
@@ -298,14 +524,22 @@ class Status:
 
     @classmethod
     def decode(cls, payload: bytes) -> "Status":
-        v = struct.unpack(STATUS_FMT, payload)
-        return cls(*v[:13], fifo=tuple(v[13:]))
+        if not payload:
+            raise BadLength("an empty GET_STATUS payload")
+        return cls(payload[0], *_STATUS.decode_values(payload[1:]))
+
+    def response_values(self) -> tuple:
+        """The declared response fields in order (everything but the result byte)."""
+        return _status_values(self)
 
     def encode(self) -> bytes:
-        return struct.pack(STATUS_FMT, self.result, self.flags, self.motion, self.carriage,
-                           self.speed, self.paper_steps, self.pass_id, self.fires_done,
-                           self.fault, self.fault_head, self.fault_pass, self.fault_column,
-                           self.ring_free, *self.fifo)
+        return bytes((self.result,)) + _STATUS.encode_values(_status_values(self))
+
+
+_STATUS = COMMANDS[Op.GET_STATUS].response
+_status_values = operator.attrgetter(*_STATUS.names)
+if tuple(f.name for f in fields(Status)) != ("result", *_STATUS.names):
+    raise TypeError("Status does not match the GET_STATUS declaration")
 
 
 # -- data channel (section 3) --------------------------------------------------------------

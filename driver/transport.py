@@ -18,9 +18,7 @@ import socket
 import termios
 import tty
 
-USB_VID = 0x1209      # pid.codes, the open-hardware vendor id (docs/driver.md)
-USB_PID = 0x5750      # "WP"
-EP_OUT, EP_IN = 0x01, 0x81
+from .protocol import EP_IN, EP_OUT, USB_PID, USB_VID   # the wire contract (docs/protocol.md 1)
 
 
 class TcpData:

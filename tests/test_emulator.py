@@ -1,8 +1,6 @@
 """The emulator reproduces the seed thesis' own tests (000, 4.2.4) and reports every
 injected fault the way the device would."""
 
-import struct
-
 import numpy as np
 import pytest
 
@@ -46,7 +44,7 @@ def test_dir_dpi_we_en_read_back_through_status():
     printer, link = connected()
     from wideprint.rip.profile import load_profile
     Device(link, None, load_profile()).load_head_config()
-    link.command(P.Op.ENABLE, b"\x01")
+    link.call(P.Op.ENABLE, on=1)
     for dir_, dpi, we in [(1, 150, 0), (0, 600, 1), (1, 300, 1), (0, 150, 0)]:
         link.write_reg(P.REG_DIR, dir_)
         link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
@@ -63,7 +61,7 @@ def test_dir_dpi_we_en_read_back_through_status():
 
 def test_print_enable_refused_before_head_configuration():
     printer, link = connected()
-    link.command(P.Op.ENABLE, b"\x01")
+    link.call(P.Op.ENABLE, on=1)
     with pytest.raises(DeviceError, match="HEADS_NOT_CONFIGURED"):
         link.write_reg(P.REG_WE_EN, 1)
     assert printer.fault == P.Fault.HEAD_CONFIG
@@ -86,10 +84,9 @@ def test_head_configuration_trace(profile):
 def test_configuration_with_a_bad_crc_is_refused(profile):
     printer, link = connected()
     digits = profile.head_config_digits()
-    packed = P.pack_digits(digits[:400])
-    link.command(P.Op.HEAD_CONFIG_DATA, struct.pack("<H", 0) + packed)
+    link.call(P.Op.HEAD_CONFIG_DATA, first=0, digits=digits[:400])
     with pytest.raises(DeviceError, match="CONFIG_CRC"):
-        link.command(P.Op.HEAD_CONFIG_LOAD, struct.pack("<HI", 1020, 12345))
+        link.call(P.Op.HEAD_CONFIG_LOAD, count=1020, crc=12345)
     assert not any(h.configured for h in printer.heads)
 
 
@@ -285,12 +282,12 @@ def test_head_alignment_finds_a_misplaced_head(tmp_path, profile):
 
 def test_fifo_flags_follow_the_level(profile):
     """Seed 4.2.2's FIFO flags, readable per head, and the DMA request they make."""
-    import struct as _s
     printer, link = connected()
     Device(link, None, profile).load_head_config()
-    link.command(P.Op.ENABLE, b"\x01")
+    link.call(P.Op.ENABLE, on=1)
     link.command(P.Op.HOME)
-    link.command(P.Op.SET_LINE, _s.pack(P.SET_LINE_FMT, 1, 0, 300, 5000, 64, 15000, 47000))
+    link.call(P.Op.SET_LINE, pass_id=1, direction=0, dpi=300, fire_start=5000, fire_count=64,
+              speed=15000, accel=47000)
     flags = link.read_reg(P.REG_FIFO_FLAGS0)
     assert flags & P.FIFO_EMPTY and flags & P.FIFO_ALMOST_EMPTY and flags & P.FIFO_DREQ
     assert not flags & P.FIFO_FULL and flags >> P.FIFO_WR_COUNT_SHIFT & 3 == 0

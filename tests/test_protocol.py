@@ -1,12 +1,17 @@
-"""docs/protocol.md: codecs, framing, reliability, and the byte-exact examples."""
+"""docs/protocol.md: the command table, codecs, framing, reliability, and the byte-exact
+examples (every opcode's, against both the codec and the emulator)."""
 
+import ast
+import random
 import re
-import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from wideprint.device_sim import dsp
 from wideprint.device_sim.endpoints import in_process
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.printer import Printer
@@ -17,52 +22,247 @@ from wideprint.driver.link import CommandLink, DeviceError, LinkError
 DOC = Path(__file__).resolve().parent.parent / "docs" / "protocol.md"
 
 
-def doc_examples() -> dict[str, tuple[str, bytes]]:
-    text = DOC.read_text()
-    block = re.search(r"```frames\n(.*?)```", text, re.S).group(1)
+def _block(kind: str) -> list[list[str]]:
+    block = re.search(rf"```{kind}\n(.*?)```", DOC.read_text(), re.S).group(1)
+    return [[part.strip() for part in line.split("|", 2)] for line in block.strip().splitlines()]
+
+
+def doc_frames() -> list[tuple[str, str, bytes]]:
+    """The `frames` block in order: (name, direction, bytes)."""
+    return [(name, direction, bytes.fromhex(hexes)) for name, direction, hexes in _block("frames")]
+
+
+def doc_fields() -> dict[str, dict]:
+    """The `fields` block: name -> the payload's fields (`-`: none)."""
     out = {}
-    for line in block.strip().splitlines():
-        name, direction, hexes = (part.strip() for part in line.split("|"))
-        out[name] = (direction, bytes.fromhex(hexes))
+    for name, text in _block("fields"):
+        call = ast.parse(f"f({'' if text == '-' else text})", mode="eval").body
+        out[name] = {kw.arg: ast.literal_eval(kw.value) for kw in call.keywords}
     return out
 
 
-EX = doc_examples()
+FRAMES = doc_frames()
+EX = {name: (direction, data) for name, direction, data in FRAMES}
+FIELDS = doc_fields()
+
+
+def command_frames():
+    """Every example that is a valid command or response frame, with its decoded frame."""
+    for name, direction, data in FRAMES:
+        if direction not in ("host->dsp", "dsp->host") or data[:1] != bytes((P.SYNC,)):
+            continue
+        frames = P.FrameDecoder().feed(data)
+        if frames and frames[0].kind != P.Kind.NAK:
+            assert frames[0].encode() == data, name
+            yield name, frames[0]
+
+
+def _crc16_reference(data: bytes) -> int:
+    """Bit by bit, as section 2.2 defines it."""
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
 
 
 def test_crc16_check_value():
     assert P.crc16_ccitt(b"123456789") == 0x29B1
+    rng = random.Random(1)
+    for n in (0, 1, 2, 7, 64, 257):
+        data = bytes(rng.randrange(256) for _ in range(n))
+        assert P.crc16_ccitt(data) == _crc16_reference(data)
 
 
+# -- the command table -------------------------------------------------------------------------
+def test_every_opcode_is_declared_handled_and_documented():
+    """A new opcode fails here until it has a declaration, a DSP handler, a row in the
+    section 2.5 table and a request and response example in section 5."""
+    ops = set(P.Op)
+    assert set(P.COMMANDS) == ops
+    assert set(dsp._HANDLERS) == ops
+    requests = {f.op for _, f in command_frames() if f.kind == P.Kind.COMMAND}
+    responses = {f.op for _, f in command_frames() if f.kind == P.Kind.RESPONSE}
+    assert requests == ops, f"no request example: {sorted(o.name for o in ops - requests)}"
+    assert responses == ops, f"no response example: {sorted(o.name for o in ops - responses)}"
+    assert set(doc_layouts()) == {op.name for op in ops}
+
+
+def doc_layouts() -> dict[str, tuple[str, str]]:
+    """Section 2.5's table: name -> (request cell, response cell)."""
+    text = DOC.read_text()
+    table = text[text.index("| op | name | command payload"):]
+    rows = {}
+    for line in table.splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows[cells[1]] = (cells[2], cells[3])
+    return rows
+
+
+def _spec(cell: str) -> str:
+    """A cell's layout: its leading `code`, or '' for '-'."""
+    if cell.startswith("-"):
+        return ""
+    m = re.match(r"`([^`]*)`", cell)
+    assert m, f"no layout in {cell!r}"
+    return m.group(1)
+
+
+def test_the_doc_table_has_the_declared_layouts():
+    for name, (request, response) in doc_layouts().items():
+        cmd = P.COMMANDS[P.Op[name]]
+        assert _spec(request) == cmd.request.spec, name
+        if cmd.echo:
+            assert response.startswith("echo"), name
+        else:
+            assert _spec(response) == cmd.response.spec, name
+
+
+def test_echoed_commands():
+    """Section 2.3: these answers repeat the command's payload and the host checks it."""
+    assert {op for op, c in P.COMMANDS.items() if c.echo} == {
+        P.Op.SET_BAUD, P.Op.ENABLE, P.Op.SET_LINE, P.Op.FEED, P.Op.WRITE_REG,
+        P.Op.HEAD_CONFIG_LOAD, P.Op.JOB_BEGIN, P.Op.JOB_END, P.Op.PING}
+
+
+def test_layouts_decode_and_encode():
+    rec = P.decode_request(P.Op.HEAD_CONFIG_DATA, bytes([0x90, 0x01, 0x21, 0xF0]))
+    assert rec == (400, (1, 2, 0, 15)) and rec.first == 400
+    assert P.encode_request(P.Op.HEAD_CONFIG_DATA, first=400, digits=[1, 2, 0, 15]) == \
+        bytes([0x90, 0x01, 0x21, 0xF0])
+    heads = P.decode_response(P.Op.HEAD_STATUS, bytes.fromhex("5e0190010108009001 02"))
+    assert heads.heads == ((350, 400, 1), (8, 400, 2)) and heads.heads[1].flags == 2
+    assert P.encode_response(P.Op.HEAD_STATUS, heads=[(350, 400, 1), dict(
+        temperature=8, piezo=400, flags=2)]) == bytes.fromhex("5e019001010800900102")
+    assert P.decode_response(P.Op.HEAD_STATUS, b"").heads == ()
+    ident = P.COMMANDS[P.Op.IDENTIFY].response
+    assert ident.decode(ident.encode(**dict(P.decode_response(
+        P.Op.IDENTIFY, EX["IDENTIFY response"][1][6:-2])._asdict()))).serial == "WP3400-EMU-0001"
+    assert P.decode_request(P.Op.PING, b"") == (b"",)
+
+
+def test_layout_errors():
+    with pytest.raises(P.BadLength):
+        P.decode_request(P.Op.SET_LINE, bytes(22))
+    with pytest.raises(P.BadLength):
+        P.decode_request(P.Op.HOME, b"\x00")
+    with pytest.raises(P.BadLength):
+        P.decode_request(P.Op.HEAD_CONFIG_DATA, b"\x00")          # no digit index
+    with pytest.raises(P.BadLength):
+        P.decode_response(P.Op.HEAD_STATUS, bytes(6))               # not whole records
+    with pytest.raises(P.BadLength):
+        P.Status.decode(b"")
+    with pytest.raises(P.LayoutError):
+        P.encode_request(P.Op.WRITE_REG, addr=0x10000, value=0)      # out of range
+    with pytest.raises(P.LayoutError):
+        P.encode_request(P.Op.WRITE_REG, addr=0x8001)                # a field missing
+    with pytest.raises(P.LayoutError):
+        P.encode_request(P.Op.JOB_END, job=1, jobs=2)                # an unknown field
+    with pytest.raises(P.LayoutError):
+        P.Status(*range(13), fifo=(0,) * 7).encode()                # 7 FIFO levels, not 8
+    with pytest.raises(P.LayoutError):
+        P.encode_request(P.Op.HEAD_CONFIG_DATA, first=0, digits=[16])
+    with pytest.raises(ValueError):
+        P.Layout("a:u8 rest:bytes b:u8", "Bad")                     # a tail must be last
+    with pytest.raises(ValueError):
+        P.Layout("a:u24", "Bad")
+
+
+def _fixed_layouts():
+    for cmd in P.COMMANDS.values():
+        for lay in (cmd.request, cmd.response):
+            if lay.tail is None and all(k != "ascii" for _, k, _ in lay.fields) and lay.size:
+                yield lay
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.data())
+def test_fixed_layouts_are_bijective(data):
+    """Any payload of the right length decodes, and encodes back to the same bytes."""
+    lay = data.draw(st.sampled_from(list(_fixed_layouts())))
+    raw = data.draw(st.binary(min_size=lay.size, max_size=lay.size))
+    rec = lay.decode(raw)
+    assert lay.encode(**rec._asdict()) == raw
+    assert lay.decode(lay.encode_values(rec)) == rec
+
+
+# -- section 5: every example, against the codec and the emulator --------------------------------
 def test_doc_examples_match_the_codec():
-    assert EX["IDENTIFY, SEQ 0"][1] == P.Frame(0, P.Kind.COMMAND, P.Op.IDENTIFY).encode()
-    assert EX["GET_STATUS, SEQ 1"][1] == P.Frame(1, P.Kind.COMMAND, P.Op.GET_STATUS).encode()
-    assert EX["WRITE_REG DIR := 1, SEQ 2"][1] == P.Frame(
-        2, P.Kind.COMMAND, P.Op.WRITE_REG, struct.pack("<HH", P.REG_DIR, 1)).encode()
-    assert EX["FEED 2909 steps, SEQ 5"][1] == P.Frame(
-        5, P.Kind.COMMAND, P.Op.FEED, struct.pack(P.FEED_FMT, 2909, 0, 4000, 40000)).encode()
-    assert EX["SET_LINE pass 7, SEQ 6"][1] == P.Frame(
-        6, P.Kind.COMMAND, P.Op.SET_LINE,
-        struct.pack(P.SET_LINE_FMT, 7, 1, 300, 1740, 2600, 15590, 47244)).encode()
+    """Encoding the documented fields gives exactly the documented frame; decoding the
+    frame gives exactly the documented fields."""
+    named = dict(command_frames())
+    assert set(named) == set(FIELDS), "every command/response example needs a fields line"
+    for name, frame in named.items():
+        fields = FIELDS[name]
+        if frame.kind == P.Kind.COMMAND:
+            assert P.decode_request(frame.op, frame.payload)._asdict() == fields, name
+            payload = P.encode_request(frame.op, **fields)
+        else:
+            assert frame.payload[0] == P.Result.OK, name
+            assert P.decode_response(frame.op, frame.payload[1:])._asdict() == fields, name
+            payload = bytes((P.Result.OK,)) + P.encode_response(frame.op, **fields)
+        assert P.Frame(frame.seq, frame.kind, frame.op, payload).encode() == EX[name][1], name
+    assert EX["NAK (CRC)"][1] == P.Frame(0, P.Kind.NAK, 0, b"\x01").encode()
     bits = np.zeros((1, 1, 128), np.uint8)
     bits[0, 0, [1, 64]] = 1
     assert EX["DATA block"][1] == P.encode_block(3, 0, 0x01, P.nozzles_to_words(bits))
     assert EX["REPORT"][1] == P.Report(0, 1, 3, 5, 80, (64,) * 8).encode()
+    assert P.Status.decode(EX["GET_STATUS response"][1][5:-2]) == P.Status(
+        0, 0, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0, 0, 2, (0,) * 8)
+
+
+def _send_rest_of_config(ser, held: int) -> None:
+    """The HEAD_CONFIG_DATA frames the doc leaves out: the configuration after its first
+    `held` digits (docs/protocol.md 5)."""
+    from wideprint.rip.profile import load_profile
+    digits = load_profile().head_config_digits()
+    for i, first in enumerate(range(held, len(digits), 400)):
+        ser.write(P.Frame(0x80 + i, P.Kind.COMMAND, P.Op.HEAD_CONFIG_DATA, P.encode_request(
+            P.Op.HEAD_CONFIG_DATA, first=first, digits=digits[first:first + 400])).encode())
+        assert ser.read(1000)[5] == P.Result.OK
 
 
 def test_emulator_answers_the_doc_examples_byte_for_byte():
-    """The emulated DSP, fed the documented host bytes, sends the documented answers."""
+    """The emulated DSP, fed the documented host bytes in order, sends the documented
+    answers."""
     ser, _ = in_process(Printer())
-    pairs = [("handshake request", "handshake reply"),
-             ("IDENTIFY, SEQ 0", "IDENTIFY response"),
-             ("GET_STATUS, SEQ 1", "GET_STATUS response"),
-             ("WRITE_REG DIR := 1, SEQ 2", "WRITE_REG echo"),
-             ("READ_REG STATUS, SEQ 3", "READ_REG answer 0x0011"),
-             ("PING with a damaged CRC", "NAK (CRC)")]
-    for request, reply in pairs:
-        assert EX[request][0] == "host->dsp" and EX[reply][0] == "dsp->host"
-        ser.write(EX[request][1])
-        assert ser.read(1000) == EX[reply][1], request
+    lines = [ln for ln in FRAMES if ln[1] in ("host->dsp", "dsp->host")]
+    held = 0
+    for (name, direction, data), (reply, rdir, expected) in zip(lines[::2], lines[1::2]):
+        assert (direction, rdir) == ("host->dsp", "dsp->host"), name
+        if data[:1] == bytes((P.SYNC,)) and data[4:5] == bytes((P.Op.HEAD_CONFIG_LOAD,)):
+            _send_rest_of_config(ser, held)
+        ser.write(data)
+        got = ser.read(1000)
+        assert got.hex(" ") == expected.hex(" "), f"{name} -> {reply}"
+        if reply in FIELDS and "held" in FIELDS[reply]:
+            held = FIELDS[reply]["held"]
+    assert len(lines) % 2 == 0
+
+
+def test_a_wrong_length_is_bad_length_for_every_opcode():
+    """Once a command passes its refusal checks (2.4) a payload that does not fit its
+    layout is answered BAD_LENGTH, and nothing is executed."""
+    printer = Printer()
+    ser, data = in_process(printer)
+    link = CommandLink(ser)
+    dev = Device(link, data, printer.profile, emulator=printer)
+    dev.connect()
+    dev.load_head_config()
+    link.call(P.Op.ENABLE, on=1)
+    link.command(P.Op.HOME)
+    for op, cmd in P.COMMANDS.items():
+        lay = cmd.request
+        wrong = [bytes(lay.size + 1)] if lay.tail is None else []
+        if lay.size:
+            wrong.append(bytes(lay.size - 1))
+        for payload in wrong:
+            with pytest.raises(DeviceError, match="BAD_LENGTH"):
+                link.command(op, payload)
+    assert printer.fault == P.Fault.NONE and printer.paper_steps == 0
 
 
 def test_driver_connect_sends_the_documented_frames():
@@ -101,7 +301,8 @@ def test_decoder_handles_split_delivery():
 
 
 def test_every_single_bit_flip_is_caught():
-    frame = P.Frame(3, P.Kind.COMMAND, P.Op.FEED, struct.pack(P.FEED_FMT, 100, 0, 4000, 40000)).encode()
+    frame = P.Frame(3, P.Kind.COMMAND, P.Op.FEED, P.encode_request(
+        P.Op.FEED, steps=100, profile=0, max_rate=4000, accel=40000)).encode()
     for i in range(1, len(frame)):          # not the SYNC byte: then there is no frame at all
         for bit in range(8):
             bad = bytearray(frame)
@@ -116,10 +317,10 @@ def test_retransmission_is_not_executed_twice():
     ser, _ = in_process(printer)
     link = CommandLink(ser)
     link.handshake()
-    link.command(P.Op.ENABLE, b"\x01")
+    link.call(P.Op.ENABLE, on=1)
     link.command(P.Op.HOME)
-    feed = P.Frame(link.seq, P.Kind.COMMAND, P.Op.FEED,
-                   struct.pack(P.FEED_FMT, 1000, 0, 4000, 40000)).encode()
+    feed = P.Frame(link.seq, P.Kind.COMMAND, P.Op.FEED, P.encode_request(
+        P.Op.FEED, steps=1000, profile=0, max_rate=4000, accel=40000)).encode()
     ser.write(feed)
     first = ser.read(100)
     ser.write(feed)                          # the host did not see the answer: same SEQ again

@@ -280,8 +280,6 @@ class PrinterWorker(QObject):
             raise
 
     def _prepare(self) -> None:
-        import struct
-        from ...driver import protocol as P
         probe = PrintJob(self.dev, _Probe(), job_id=0)     # its prepare(): connect, home, measure
         try:
             probe.prepare()
@@ -293,7 +291,7 @@ class PrinterWorker(QObject):
             # the operator can read the fault and clear it
             self._emit_device(st, self._head_temps())
             return
-        present, left, right = struct.unpack(P.PAPER_FMT, self.dev.link.command(P.Op.GET_PAPER))
+        present, left, right = self.dev.link.paper()
         cpi = self.dev.profile.counts_per_inch
         self.paper_mm = (right - left) / cpi * 25.4 if present else None
         st = self.dev.link.status()
@@ -301,12 +299,7 @@ class PrinterWorker(QObject):
 
     def _head_temps(self) -> tuple:
         """HEAD_STATUS: temperatures in °C (as PrintJob reads them)."""
-        import struct
-        from ...driver import protocol as P
-        raw = self.dev.link.command(P.Op.HEAD_STATUS)
-        size = struct.calcsize(P.HEAD_STATUS_FMT)
-        return tuple(struct.unpack_from(P.HEAD_STATUS_FMT, raw, i * size)[0] / 10
-                     for i in range(len(raw) // size))
+        return tuple(h.temperature / 10 for h in self.dev.link.head_status())
 
     def _emit_device(self, st=None, temps=(), error: str = "") -> None:
         from ...driver.job import fault_message

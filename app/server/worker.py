@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import struct
 import threading
 import time
 from typing import TYPE_CHECKING
@@ -251,7 +250,7 @@ class Worker(threading.Thread):
         from ...driver import protocol as P
         dev.connect()
         if dev.link.status().flags & P.FLAG_JOB_OPEN:
-            dev.link.command(P.Op.JOB_END, struct.pack("<I", job_id))
+            dev.link.call(P.Op.JOB_END, job=job_id)
 
     def _finish(self, job: dict, state: str, message: str) -> None:
         self.srv.hot_done(job, state, message)
