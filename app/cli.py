@@ -384,6 +384,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report
 
+    from .printer_cli import add_parser as add_printer_parser
+    add_printer_parser(sub)       # printer status|home|park|feed|measure|clear-fault
+
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)
 

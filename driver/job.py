@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from . import protocol as P
 from .device import Device
 from .link import DeviceError, LinkError
+from .printer import Printer, PrinterFault, fault_message  # noqa: F401 - fault_message: re-exported
 from .stream import PassStreamer, StreamError
 from ..rip.load import ImageError
 from ..rip.pipeline import RipJob, prefetch
@@ -114,20 +115,6 @@ class JobReport:
         return dict(self.__dict__)
 
 
-def fault_message(st: P.Status, profile) -> str:
-    text = P.FAULT_TEXT.get(P.Fault(st.fault), f"fault 0x{st.fault:02X}") \
-        if st.fault in P.Fault._value2member_map_ else f"fault 0x{st.fault:02X}"
-    where = []
-    if st.fault_head != 0xFF and st.fault_head < len(profile.heads):
-        where.append(f"head {profile.heads[st.fault_head].name}")
-    if st.fault in (P.Fault.FIFO_UNDERRUN, P.Fault.HEAD_DATA, P.Fault.OVERSPEED,
-                    P.Fault.DATA_LINK_LOST, P.Fault.HEAD_OVERTEMP, P.Fault.LIMIT_RIGHT,
-                    P.Fault.LIMIT_LEFT, P.Fault.ENCODER, P.Fault.DATA_SEQUENCE, P.Fault.DATA_CRC):
-        where.append(f"pass {st.fault_pass}")
-        where.append(f"column {st.fault_column}")
-    return text + (f" ({', '.join(where)})" if where else "")
-
-
 class PrintJob:
     def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None,
                  speed_mm_s: float | None = None, allow_overspeed: bool = False,
@@ -148,6 +135,7 @@ class PrintJob:
         self.poll_interval = device.timing.poll_interval_s
         self.control = JobControl()
         self.telemetry = Telemetry()
+        self.printer = Printer(device, on_status=self._seen)   # every status read feeds the telemetry
         self._state("queued")
 
     # -- telemetry --------------------------------------------------------------------------
@@ -168,52 +156,30 @@ class PrintJob:
 
     def _read_head_temps(self) -> None:
         try:
-            heads = self.dev.link.head_status()
+            self.telemetry.head_temps_c = self.printer.head_temperatures()
         except (LinkError, DeviceError):
-            return
-        self.telemetry.head_temps_c = tuple(h.temperature / 10 for h in heads)
+            pass
 
     # -- device steps ---------------------------------------------------------------------
     def _wait(self, done, what: str, timeout: float = 120.0) -> P.Status:
-        deadline = time.monotonic() + timeout
-        while True:
-            st = self._seen(self.dev.link.status())
-            if st.fault != P.Fault.NONE:
-                raise JobError(f"{what}: {fault_message(st, self.profile)}", st.fault, st.fault_pass)
-            if done(st):
-                return st
-            if time.monotonic() > deadline:
-                raise JobError(f"{what}: the printer did not finish within {timeout:.0f} s")
-            if self.poll_interval:
-                time.sleep(self.poll_interval)
+        try:
+            return self.printer.wait(done, what, timeout)
+        except PrinterFault as exc:
+            raise JobError(str(exc), exc.fault, exc.stroke) from None
 
     def prepare(self) -> P.Status:
-        link = self.dev.link
-        self.dev.connect()
-        st = link.status()
-        if st.fault != P.Fault.NONE:
-            raise JobError(f"printer reports a fault: {fault_message(st, self.profile)}", st.fault)
-        if not st.flags & P.FLAG_HEADS_CONFIGURED:
-            self._state("connecting", "loading head configuration")
-            self.dev.load_head_config()
-        if not st.flags & P.FLAG_ENABLED:
-            link.call(P.Op.ENABLE, on=1)
-        if not st.flags & P.FLAG_HOMED:
-            self._state("connecting", "homing")
-            link.command(P.Op.HOME)
-            self._wait(lambda s: s.flags & P.FLAG_HOMED and s.motion == P.Motion.IDLE, "homing")
-        if not st.flags & P.FLAG_PAPER_MEASURED:
-            self._state("connecting", "measuring paper")
-            link.command(P.Op.MEASURE_PAPER)
-            self._wait(lambda s: s.flags & P.FLAG_PAPER_MEASURED and s.motion == P.Motion.IDLE,
-                       "measuring the paper")
-        return link.status()
+        """The printer brought to readiness (driver/printer.py `ready`)."""
+        try:
+            return self.printer.ready(on_step=lambda words: self._state("connecting", words))
+        except PrinterFault as exc:
+            raise JobError(str(exc), exc.fault, exc.stroke) from None
 
     def place(self) -> int:
         """x0: encoder count of image column 0 on the measured paper, from the placement's
         side margins, alignment and offset (docs/placement.md, "Position on the paper");
         refuses a job that does not fit, before anything prints."""
-        present, left, right = self.dev.link.paper()
+        paper = self.printer.paper()
+        present, left, right = paper.present, paper.left_counts, paper.right_counts
         if not present:
             raise JobError("no paper loaded", P.Fault.PAPER_OUT)
         prof = self.profile
@@ -257,14 +223,10 @@ class PrintJob:
         return int(round(float(self.rip.settings.placement.top_mm) * 1000 / self.profile.row_um))
 
     def feed_to(self, target_steps: int) -> None:
-        link = self.dev.link
-        st = link.status()
+        st = self.printer.status()
         delta = target_steps - st.paper_steps
         if delta:
-            f = self.profile.feed
-            prof = 1 if f.profile == "sigmoid" else 0
-            link.call(P.Op.FEED, steps=delta, profile=prof, max_rate=int(f.max_steps_s),
-                      accel=int(f.accel_steps_s2))
+            self._command(lambda: self.printer.feed_steps(delta, wait=False))
             st = self._wait(lambda s: s.motion == P.Motion.IDLE, "feeding paper")
         if st.paper_steps != target_steps:
             raise JobError(f"paper is at step {st.paper_steps}, expected {target_steps}: "
@@ -282,6 +244,13 @@ class PrintJob:
                            f"{self.speed_mm_s / 25.4 * dpi:.0f} Hz, above their "
                            f"{prof.max_fire_hz:.0f} Hz (limit {limit:.0f} mm/s)")
         return int(self.speed_mm_s / 25.4 * prof.counts_per_inch)
+
+    def _command(self, step):
+        """A printer command; refused because a fault is latched, it names that fault."""
+        try:
+            return step()
+        except PrinterFault as exc:
+            raise JobError(str(exc), exc.fault, exc.stroke) from None
 
     def _recovering(self, step, what: str):
         """Run a step; on a lost link reconnect and run it again (each step is written to
@@ -363,7 +332,7 @@ class PrintJob:
             elif self.control.cancelled.is_set():
                 link.command(P.Op.STOP)
                 raise JobCancelled(f"cancelled during pass {pd.index}")
-            st = self._seen(link.status())
+            st = self.printer.status()
             if st.fault != P.Fault.NONE:
                 raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
             if streamer.error is not None:      # the device's own report (above) comes first
@@ -427,7 +396,7 @@ class PrintJob:
             self._recovering(lambda: self.feed_to(out), "feeding the job out")
             self._recovering(lambda: link.call(P.Op.JOB_END, job=self.job_id),
                              "ending the job")
-            self._recovering(lambda: link.command(P.Op.PARK), "parking")
+            self._recovering(lambda: self._command(lambda: self.printer.park(wait=False)), "parking")
             rep.passes_skipped = rep.passes_total - rep.passes_printed
             rep.state = "done"
             self._state("done")
@@ -439,10 +408,10 @@ class PrintJob:
         except (JobError, LinkError, DeviceError, StreamError, ImageError) as exc:
             # ImageError: the file broke while streaming (a corrupt strip far down)
             rep.state = "failed"
-            rep.message = str(exc)
+            rep.message = self._failure_words(exc)
             self._safe_stop()
-            self._state("failed", str(exc))
-            raise JobError(str(exc), getattr(exc, "fault", 0), getattr(exc, "pass_id", None)) from exc
+            self._state("failed", rep.message)
+            raise JobError(rep.message, getattr(exc, "fault", 0), getattr(exc, "pass_id", None)) from exc
         finally:
             rep.retries = self.dev.link.retries
             self.telemetry.recoveries = rep.recoveries
@@ -454,13 +423,25 @@ class PrintJob:
                 (rip.height * prof.row_um * 1e-6)
         return rep
 
+    def _failure_words(self, exc: Exception) -> str:
+        """What went wrong in plain words: a command refused because the printer latched a
+        fault names that fault, not the refusal."""
+        if isinstance(exc, DeviceError) and exc.result == P.Result.FAULT_ACTIVE:
+            try:
+                fault = self.printer.fault_text()
+            except Exception:  # noqa: BLE001 - the refusal is all we know
+                fault = ""
+            if fault:
+                return f"{P.op_name(exc.op)} refused: {fault}"
+        return str(exc)
+
     def _checkpoint(self, **values) -> None:
         self.checkpoint.update(values)
         self.on_event("checkpoint", checkpoint=dict(self.checkpoint))
 
     def _estop(self) -> None:
         try:
-            self.dev.link.command(P.Op.ESTOP)
+            self.printer.estop()
         finally:
             raise JobError("emergency stop by the operator", P.Fault.ESTOP)
 
@@ -484,6 +465,6 @@ class PrintJob:
         except Exception:  # noqa: BLE001 - the original error is what the operator needs
             pass
         try:
-            self.dev.link.command(P.Op.STOP)
+            self.printer.stop()
         except Exception:  # noqa: BLE001
             pass

@@ -204,6 +204,13 @@ class Printer:
         """Clear a latched fault; the fault code that was cleared (0: there was none)."""
         return self.link.call(P.Op.CLEAR_FAULT).fault
 
+    def end_open_job(self, job_id: int) -> bool:
+        """End the printer's open job `job_id`, if one is open (JOB_END); True if it was."""
+        if not self.status().flags & P.FLAG_JOB_OPEN:
+            return False
+        self.link.call(P.Op.JOB_END, job=job_id)
+        return True
+
     def stop(self) -> None:
         """End a running line at once (the carriage brakes); the job decides what next."""
         self.link.call(P.Op.STOP)

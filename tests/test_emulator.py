@@ -124,7 +124,7 @@ def test_sawtooth_slope_is_the_same_at_two_speeds(tmp_path, profile):
 def test_printing_stops_when_the_carriage_stops(tmp_path, profile):
     job, planes = pattern("sawtooth", profile, width_cols=500)
     limit = 5_000           # counts: a limit switch trips while K1 is drawing the ramp
-    with pytest.raises(JobError, match="right limit switch.*pass 0, column"):
+    with pytest.raises(JobError, match="right limit switch.*stroke 0, column"):
         run(job, profile, tmp_path / "m.tif", Faults(limit_at=limit))
     media = read_planes(tmp_path / "m.tif")
     # the print is exact up to the column where the line stopped, and empty after it
@@ -168,11 +168,11 @@ def test_nozzle_check_fires_nozzles_the_profile_lists_as_dead(tmp_path, profile)
 
 
 @pytest.mark.parametrize("faults,pattern_text", [
-    (Faults(overtemp=[("K2", 0)]), r"over-temperature \(head K2, pass 0, column"),
+    (Faults(overtemp=[("K2", 0)]), r"over-temperature \(head K2, stroke 0, column"),
     (Faults(paper_length_mm=5), r"paper out"),
-    (Faults(encoder_glitch_at=9_000), r"encoder glitch.*pass 0, column"),
+    (Faults(encoder_glitch_at=9_000), r"encoder glitch.*stroke 0, column"),
     (Faults(fifo_words=128, host_jitter="loaded", seed=3, starve_guard=0),
-     r"FIFO underrun.*pass \d+, column"),
+     r"FIFO underrun.*stroke \d+, column"),
 ])
 def test_device_faults_stop_the_job_with_a_clear_message(tmp_path, profile, faults, pattern_text):
     planes = random_planes(600, 2000, seed=5)

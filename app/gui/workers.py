@@ -225,11 +225,6 @@ class Ticket:
     device: "DeviceConfig | None" = None
 
 
-class _Probe:
-    """What PrintJob needs of a RIP job to connect, home and measure (prepare())."""
-    path = "(connect)"
-
-
 class PrinterWorker(QObject):
     deviceChanged = Signal(object)           # connected, spec, paper_mm, info, temps, fault ...
     jobStarted = Signal(int, object)         # item id, {copy, copies, width, height, dpi, media, sink}
@@ -279,30 +274,35 @@ class PrinterWorker(QObject):
             self._close()
             raise
 
+    @property
+    def printer(self):
+        """The printer API (driver/printer.py) on the open device."""
+        from ...driver.printer import Printer
+        return Printer(self.dev)
+
     def _prepare(self) -> None:
-        probe = PrintJob(self.dev, _Probe(), job_id=0)     # its prepare(): connect, home, measure
+        from ...driver.printer import PrinterFault
+        printer = self.printer
         try:
-            probe.prepare()
-        except JobError:
-            st = self.dev.link.status()
+            printer.ready()                       # connect, configure, enable, home, measure
+        except PrinterFault:
+            st = printer.status()
             if st.fault == 0:
                 raise
             # reachable but in a fault (e.g. after an emergency stop): stay connected, so
             # the operator can read the fault and clear it
             self._emit_device(st, self._head_temps())
             return
-        present, left, right = self.dev.link.paper()
-        cpi = self.dev.profile.counts_per_inch
-        self.paper_mm = (right - left) / cpi * 25.4 if present else None
-        st = self.dev.link.status()
-        self._emit_device(st, self._head_temps())
+        paper = printer.paper()
+        self.paper_mm = paper.width_mm if paper.present else None
+        self._emit_device(printer.status(), self._head_temps())
 
     def _head_temps(self) -> tuple:
-        """HEAD_STATUS: temperatures in °C (as PrintJob reads them)."""
-        return tuple(h.temperature / 10 for h in self.dev.link.head_status())
+        """Head temperatures in °C (as PrintJob reads them)."""
+        return self.printer.head_temperatures()
 
     def _emit_device(self, st=None, temps=(), error: str = "") -> None:
-        from ...driver.job import fault_message
+        from ...driver.printer import fault_message
         d = dict(connected=self.dev is not None, spec=self.cfg.spec if self.cfg else "",
                  paper_mm=self.paper_mm, error=error, temps=tuple(temps), fault="",
                  info=dict(self.dev.info or {}) if self.dev is not None else {},
@@ -352,7 +352,7 @@ class PrinterWorker(QObject):
         if self.dev is None or self.busy:
             return
         try:
-            st = self.dev.link.status()
+            st = self.printer.status()
             self._emit_device(st, self._head_temps())
         except Exception as exc:  # noqa: BLE001
             self._emit_device(error=f"status: {exc}")
@@ -363,9 +363,9 @@ class PrinterWorker(QObject):
             return
         from ...driver import protocol as P
         try:
-            self.dev.link.command(P.Op.CLEAR_FAULT)
+            self.printer.clear_fault()
             log.info("fault cleared")
-            st = self.dev.link.status()
+            st = self.printer.status()
             if not st.flags & P.FLAG_HOMED or not st.flags & P.FLAG_PAPER_MEASURED:
                 self._prepare()
             else:
@@ -378,11 +378,10 @@ class PrinterWorker(QObject):
     def estop_idle(self) -> None:
         if self.dev is None:
             return
-        from ...driver import protocol as P
         try:
-            self.dev.link.command(P.Op.ESTOP)
+            self.printer.estop()
             log.warning("emergency stop")
-            self._emit_device(self.dev.link.status())
+            self._emit_device(self.printer.status())
         except Exception as exc:  # noqa: BLE001
             self._emit_device(error=str(exc))
 

@@ -247,10 +247,10 @@ class Worker(threading.Thread):
         would take the new JOB_BEGIN (same id, same image area) for the host reconnecting:
         keep the old placement's media and paper position.  End it first (docs/server.md,
         "Requeue")."""
-        from ...driver import protocol as P
-        dev.connect()
-        if dev.link.status().flags & P.FLAG_JOB_OPEN:
-            dev.link.call(P.Op.JOB_END, job=job_id)
+        from ...driver.printer import Printer
+        printer = Printer(dev)
+        printer.connect()
+        printer.end_open_job(job_id)
 
     def _finish(self, job: dict, state: str, message: str) -> None:
         self.srv.hot_done(job, state, message)

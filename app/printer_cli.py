@@ -1,0 +1,153 @@
+"""`wideprint printer status|home|park|feed MM|measure|clear-fault`: the machine commands
+of the printer API (driver/printer.py) from the command line, on a real link or the
+emulator (docs/driver.md, "The printer API").
+
+A motion command brings the printer as far as it needs first (enable, home), as the
+front panel of a plotter does, and says so.  Exit codes as `print`: 0 done, 1 the printer
+refused or faulted, 2 bad options, 3 the printer cannot be reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
+ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault")
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("printer", help="printer status and machine commands (home, park, "
+                       "feed, measure the paper, clear a fault)",
+                       description="Status and machine commands of one printer, through the "
+                       "driver's printer API.")
+    p.add_argument("action", choices=ACTIONS)
+    p.add_argument("mm", nargs="?", type=float, help="feed: millimetres of paper (negative: back)")
+    p.add_argument("--device", default="emulator",
+                   help="'emulator', 'emulator-usb' or serial=PORT,data=URL (docs/driver.md)")
+    p.add_argument("--profile", metavar="TOML", help="printer profile")
+    p.add_argument("--inject", action="append", metavar="KIND=VALUE",
+                   help="emulator fault (docs/emulator.md)")
+    p.add_argument("--json", action="store_true", help="status as JSON")
+    p.set_defaults(func=cmd_printer)
+
+
+def status_dict(printer) -> dict:
+    """Everything the status command shows, as JSON-able values."""
+    from ..driver import protocol as P
+    st = printer.status()
+    info = printer.identity or {}
+    flags = {name: bool(st.flags & bit) for name, bit in (
+        ("enabled", P.FLAG_ENABLED), ("homed", P.FLAG_HOMED),
+        ("heads_configured", P.FLAG_HEADS_CONFIGURED), ("paper_measured", P.FLAG_PAPER_MEASURED),
+        ("job_open", P.FLAG_JOB_OPEN))}
+    cpi = printer.profile.counts_per_inch
+    out = dict(
+        firmware=f"{info.get('firmware', 0) >> 8}.{info.get('firmware', 0) & 0xFF}",
+        serial=info.get("serial", ""), protocol=f"{info.get('proto_major')}.{info.get('proto_minor')}",
+        **flags, motion=P.Motion(st.motion).name.lower() if st.motion in P.Motion._value2member_map_
+        else str(st.motion),
+        carriage_mm=round(st.carriage / cpi * 25.4, 2), paper_steps=st.paper_steps,
+        fifo_words=dict(zip((h.name for h in printer.profile.heads), printer.fifo_levels(st))),
+        heads={h.name: dict(temperature_c=h.temperature_c, piezo_v=h.piezo_v,
+                            configured=h.configured, overtemp=h.overtemp, dead=h.dead)
+               for h in printer.heads()},
+        fault=printer.fault_text(st) or None)
+    if flags["paper_measured"]:
+        paper = printer.paper()
+        out["paper"] = dict(present=paper.present, width_mm=round(paper.width_mm, 1),
+                            left_mm=round(paper.left_mm, 1))
+    return out
+
+
+def _print_status(d: dict) -> None:
+    print(f"printer: firmware {d['firmware']}, serial {d['serial']}, protocol {d['protocol']}")
+    state = [k.replace("_", " ") for k in ("enabled", "homed", "heads_configured",
+                                           "paper_measured", "job_open") if d[k]]
+    print(f"state: {', '.join(state) or 'not enabled'}; motion {d['motion']}")
+    print(f"carriage: {d['carriage_mm']} mm; paper feed: step {d['paper_steps']}")
+    if "paper" in d:
+        p = d["paper"]
+        print(f"paper: {p['width_mm']} mm wide from {p['left_mm']} mm" if p["present"] else "paper: none")
+    print("heads: " + ", ".join(f"{n} {h['temperature_c']:.1f} °C" + (" OVER-TEMPERATURE" if h["overtemp"] else "")
+                                + ("" if h["configured"] else " (not configured)")
+                                for n, h in d["heads"].items()))
+    print("FIFO words: " + ", ".join(f"{n} {w}" for n, w in d["fifo_words"].items()))
+    print(f"fault: {d['fault'] or 'none'}")
+
+
+def cmd_printer(args) -> int:
+    from ..driver import protocol as P
+    from ..driver.link import DeviceError, LinkError
+    from ..driver.printer import Printer, PrinterFault
+    from ..rip.profile import load_profile
+    from .devices import close_device, is_emulator_spec, open_device
+    if (args.action == "feed") != (args.mm is not None):
+        print("wideprint printer: feed takes a length in mm (and only feed does)", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        profile = load_profile(args.profile)
+        faults = None
+        if args.inject:
+            if not is_emulator_spec(args.device):
+                raise ValueError("--inject needs --device emulator")
+            from ..device_sim.faults import Faults
+            faults = Faults.parse(args.inject)
+    except ValueError as exc:
+        print(f"wideprint printer: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        dev = open_device(args.device, profile, faults)
+    except (LinkError, ValueError, OSError) as exc:
+        print(f"wideprint printer: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    printer = Printer(dev)
+    try:
+        printer.connect()
+        if args.action == "status":
+            d = status_dict(printer)
+            print(json.dumps(d, indent=2)) if args.json else _print_status(d)
+            return EXIT_OK
+        if args.action == "clear-fault":
+            cleared = printer.clear_fault()
+            print(f"cleared: {P.FAULT_TEXT.get(P.Fault(cleared), hex(cleared))}" if cleared
+                  in P.Fault._value2member_map_ and cleared else "no fault was latched")
+            return EXIT_OK
+        st = printer.status()
+        if st.fault != P.Fault.NONE:
+            print(f"wideprint printer: {args.action}: the printer reports a fault: "
+                  f"{printer.fault_text(st)} (clear it first: wideprint printer clear-fault)",
+                  file=sys.stderr)
+            return EXIT_FAILED
+        if not st.flags & P.FLAG_ENABLED:
+            printer.enable()
+        if args.action == "home" or not st.flags & P.FLAG_HOMED:
+            print("homing")
+            printer.home()
+        if args.action == "park":
+            printer.park()
+            print(f"parked at {printer.status().carriage / profile.counts_per_inch * 25.4:.1f} mm")
+        elif args.action == "measure":
+            paper = printer.measure_paper()
+            print(f"paper: {paper.width_mm:.1f} mm wide from {paper.left_mm:.1f} mm" if paper.present
+                  else "paper: none loaded")
+        elif args.action == "feed":
+            steps = printer.feed(args.mm)
+            print(f"fed {steps * profile.feed_um_per_step / 1000:.3f} mm ({steps} steps)")
+        return EXIT_OK
+    except LinkError as exc:
+        print(f"wideprint printer: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    except (PrinterFault, DeviceError) as exc:
+        print(f"wideprint printer: {args.action}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    finally:
+        close_device(dev)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="wideprint")
+    add_parser(ap.add_subparsers(dest="command", required=True))
+    args = ap.parse_args(argv)
+    return args.func(args)
