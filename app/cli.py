@@ -113,6 +113,7 @@ def cmd_print(args) -> int:
     from .devices import open_device
     from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
+    from ..driver.printer import Printer
     from ..rip.load import ImageError
     from ..rip.pipeline import RipJob
     from .server_cli import progress
@@ -134,6 +135,12 @@ def cmd_print(args) -> int:
                           event_log=args.event_log, **_emulator_options(args))
     except (LinkError, ValueError, OSError) as exc:
         print(f"wideprint print: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    try:                          # reachable at all? (a port that is open but silent: exit 3)
+        Printer(dev).connect()
+    except LinkError as exc:
+        print(f"wideprint print: {exc}", file=sys.stderr)
+        _close_device(dev, args)
         return EXIT_DEVICE
     reports, failed = [], 0
     say = sys.stderr if args.json else sys.stdout     # --json keeps stdout machine-readable

@@ -181,11 +181,11 @@ class Dsp:
 
     @handles(P.Op.HEAD_CONFIG_DATA)
     def head_config_data(self, first, digits):
-        if first == 0:
-            self.config_digits = []
-        if first != len(self.config_digits) or first + len(digits) > 1022:
+        # digits from `first` on are (re)written: a host resending a chunk whose answer it
+        # lost, after a reconnect, gets the same result (docs/protocol.md 2.5)
+        if first > len(self.config_digits) or first + len(digits) > 1022:
             return P.Result.BAD_ARGUMENT
-        self.config_digits += digits
+        self.config_digits[first:] = digits
         return dict(held=len(self.config_digits))
 
     @handles(P.Op.HEAD_CONFIG_LOAD)

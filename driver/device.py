@@ -14,12 +14,26 @@ in app/devices.py; the driver only knows the links and what timing a device need
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 from . import protocol as P
 from .link import CommandLink, LinkError
 from .transport import NodeData, TcpData, UsbData
 from ..rip.profile import Profile
+
+
+def config_chunk_digits(bit_error_rate: float) -> int:
+    """Head-configuration digits per HEAD_CONFIG_DATA frame for a line with this bit error
+    rate: the largest even count whose request and answer (frame overhead, `first`, the
+    packed digits, the 3-byte answer) cross the line intact 3 times in 4; 400 digits
+    (200 bytes, near the frame limit) on a clean line, never fewer than 8."""
+    if bit_error_rate <= 0:
+        return 400
+    budget_bits = math.log(1 / 0.75) / bit_error_rate     # (1 - p)^bits >= 0.75
+    fixed = 10 * (2 * P.FRAME_OVERHEAD + 2 + 3)            # two frames' overhead, first, answer
+    return int(max(8, min(400, 2 * ((budget_bits - fixed) / 10))) // 2 * 2)
 
 
 @dataclass(frozen=True)
@@ -53,10 +67,24 @@ class Device:
         self.info = self.link.identify()
         return self.info
 
-    def load_head_config(self) -> None:
+    def load_head_config(self, resume_from: int = 0) -> None:
+        """Send the XJ128 configuration (docs/head-config.md) in HEAD_CONFIG_DATA frames,
+        then HEAD_CONFIG_LOAD.  The frame size follows the line: 400 digits on a clean
+        line, fewer as the measured bit error rate grows (docs/driver.md, "A noisy serial
+        line").  A frame that fails its 3 tries raises LinkError with `.config_held` =
+        the digits the printer acknowledged, so the caller can reconnect and resume there
+        (HEAD_CONFIG_DATA rewrites from `first`, so resending a chunk is harmless)."""
         digits = self.profile.head_config_digits()
-        for first in range(0, len(digits), 400):            # 400 digits = 200 bytes a frame
-            self.link.call(P.Op.HEAD_CONFIG_DATA, first=first, digits=digits[first:first + 400])
+        first = resume_from
+        while first < len(digits):
+            n = config_chunk_digits(self.link.quality.bit_error_rate())
+            try:
+                held = self.link.call(P.Op.HEAD_CONFIG_DATA, first=first,
+                                      digits=digits[first:first + n]).held
+            except LinkError as exc:
+                exc.config_held = first
+                raise
+            first = held
         self.link.call(P.Op.HEAD_CONFIG_LOAD, count=len(digits),
                        crc=P.crc32(P.pack_digits(digits)))
 

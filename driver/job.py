@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 from . import protocol as P
 from .device import Device
-from .link import DeviceError, LinkError
+from .link import DeviceError, LineTooNoisy, LinkError
 from .printer import Printer, PrinterFault, fault_message  # noqa: F401 - fault_message: re-exported
 from .stream import PassStreamer, StreamError
 from ..rip.load import ImageError
@@ -254,18 +254,27 @@ class PrintJob:
 
     def _recovering(self, step, what: str):
         """Run a step; on a lost link reconnect and run it again (each step is written to
-        pick up from the device's status, so nothing is done twice)."""
-        tries = 0
+        pick up from the device's status, so nothing is done twice).  Reconnecting goes on
+        while the link makes progress (commands are answered between the losses); it
+        stops after MAX_RECOVERIES losses in a row with nothing answered, or at once when
+        the measured bit error rate leaves the protocol no chance (LineTooNoisy)
+        (docs/driver.md, "A noisy serial line")."""
+        barren = 0
         while True:
+            answered = self.dev.link.frames_ok
             try:
                 return step()
             except (LinkError, StreamError) as exc:
-                tries += 1
-                if tries > MAX_RECOVERIES:
+                if isinstance(exc, LineTooNoisy):
+                    raise
+                self.dev.link.check_line()
+                barren = barren + 1 if self.dev.link.frames_ok == answered else 1
+                if barren > MAX_RECOVERIES:
                     raise
                 self.report.recoveries += 1
-                log.warning("%s: %s; reconnecting (%d of %d)", what, exc, tries, MAX_RECOVERIES)
-                self.on_event("recover", what=what, error=str(exc), attempt=tries)
+                log.warning("%s: %s; reconnecting (%d without progress, of %d)", what, exc,
+                            barren, MAX_RECOVERIES)
+                self.on_event("recover", what=what, error=str(exc), attempt=barren)
                 self._reconnect(data=isinstance(exc, StreamError))
 
     def _reconnect(self, data: bool) -> None:
@@ -277,9 +286,14 @@ class PrintJob:
                 self.dev.connect()
                 return
             except (LinkError, OSError) as exc:
+                if isinstance(exc, LineTooNoisy):
+                    raise
                 last = exc
+                self.dev.link.check_line()
                 time.sleep(self.dev.timing.reconnect_backoff_s * (attempt + 1))
-        raise LinkError(f"cannot reconnect to the printer: {last}")
+        ber = self.dev.link.quality.bit_error_rate()
+        raise LinkError(f"cannot reconnect to the printer: {last}"
+                        + (f" (the serial line's measured bit error rate is {ber:.1e})" if ber else ""))
 
     def print_pass(self, pd: PassData, x0: int) -> None:
         self._recovering(lambda: self._print_pass_once(pd, x0), f"pass {pd.index}")

@@ -4,7 +4,9 @@ are encoded and decoded from the declarations in driver/protocol.py (section 2.5
 
 from __future__ import annotations
 
+import collections
 import logging
+import math
 import threading
 import time
 
@@ -15,6 +17,50 @@ log = logging.getLogger("wideprint.link")
 
 class LinkError(ConnectionError):
     """The command channel failed: 3 tries of one frame, no handshake, or a bad echo."""
+
+
+class LineTooNoisy(LinkError):
+    """The serial line damages so many frames that the protocol cannot work over it; the
+    message gives the measured bit error rate (docs/driver.md, "A noisy serial line")."""
+
+
+class LineQuality:
+    """The measured bit error rate of the command channel (docs/driver.md, "A noisy serial
+    line").  Every try of a frame is a trial over the bits it put on the line (request and
+    answer, 10 bits a byte with start and stop bits) that succeeds with probability
+    (1 - p)^bits, so p = -ln(share of tries that succeeded) / mean bits a try.  The share
+    is smoothed ((ok + 1/2) / (tries + 1)) so that a run of failures gives a finite, large
+    estimate rather than none.  The window forgets old tries, so a line that recovers (a
+    connector re-seated) is seen to."""
+
+    WINDOW = 400                # tries remembered
+
+    def __init__(self) -> None:
+        self._tries: collections.deque = collections.deque(maxlen=self.WINDOW)
+
+    def record(self, bits: int, ok: bool) -> None:
+        self._tries.append((bits, ok))
+
+    def reset(self) -> None:
+        self._tries.clear()
+
+    @property
+    def tries(self) -> int:
+        return len(self._tries)
+
+    def bit_error_rate(self) -> float:
+        n = len(self._tries)
+        if not n:
+            return 0.0
+        ok = sum(1 for _, good in self._tries if good)
+        if ok == n:
+            return 0.0
+        mean_bits = sum(b for b, _ in self._tries) / n
+        return -math.log((ok + 0.5) / (n + 1)) / mean_bits
+
+    def frame_success(self, nbytes: int) -> float:
+        """Probability that a frame of nbytes crosses the line intact."""
+        return (1.0 - min(self.bit_error_rate(), 1.0)) ** (10 * nbytes)
 
 
 class DeviceError(RuntimeError):
@@ -38,6 +84,9 @@ class CommandLink:
         self.decoder = P.FrameDecoder()
         self.retries = 0          # retransmissions made (telemetry)
         self.frames = 0
+        self.frames_ok = 0        # commands answered (progress, for the job's recovery)
+        self.quality = LineQuality()
+        self._answer_sizes: dict[int, int] = {}   # last answer frame size per opcode
         self._lock = threading.RLock()   # one command at a time, from any thread (ESTOP)
         # an in-process device answers synchronously: no answer now means none is coming
         self.synchronous = bool(getattr(port, "synchronous", False))
@@ -90,7 +139,12 @@ class CommandLink:
             self.port.write(frame)
             resp = self._await(seq, op, len(frame))
             if resp is None:
+                self.quality.record(10 * (len(frame) + self._answer_bytes(op, payload)), False)
                 continue
+            answer = len(resp.payload) + P.FRAME_OVERHEAD
+            self._answer_sizes[op] = answer
+            self.quality.record(10 * (len(frame) + answer), True)
+            self.frames_ok += 1
             result, data = resp.payload[0], resp.payload[1:]
             if result != P.Result.OK:
                 raise DeviceError(op, result)
@@ -99,6 +153,27 @@ class CommandLink:
                 raise LinkError(f"{P.op_name(op)}: the printer echoed different parameters")
             return data
         raise LinkError(f"{P.op_name(op)}: no valid answer after {self.tries} tries")
+
+    def _answer_bytes(self, op: int, payload: bytes) -> int:
+        """The answer frame a try of `op` expects, for the line-quality estimate: the
+        echo, the declared fixed layout, or the last answer seen."""
+        if op in self._answer_sizes:
+            return self._answer_sizes[op]
+        cmd = P.COMMANDS.get(op)
+        body = len(payload) if cmd is not None and cmd.echo else \
+            (cmd.response.size if cmd is not None else 0)
+        return P.FRAME_OVERHEAD + 1 + body
+
+    def check_line(self, largest_frame: int = 64) -> None:
+        """LineTooNoisy when the measured error rate leaves a frame of `largest_frame`
+        bytes (a status answer and its request) less than a 1 in 20 chance per try:
+        then 3 tries fail more often than not and no amount of reconnecting helps."""
+        q = self.quality
+        if q.tries >= 12 and q.frame_success(largest_frame) < 0.05:
+            raise LineTooNoisy(
+                f"the serial line is too noisy: measured bit error rate {q.bit_error_rate():.1e} "
+                f"({1 - q.frame_success(largest_frame):.0%} of {largest_frame}-byte frames "
+                f"damaged); check the cable and its screening, or lower the baud rate")
 
     def _await(self, seq: int, op: int, sent: int) -> P.Frame | None:
         deadline = time.monotonic() + self.timeout + self._frame_time(sent + 64)

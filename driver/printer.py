@@ -18,7 +18,7 @@ from typing import Callable
 
 from . import protocol as P
 from .device import Device
-from .link import DeviceError
+from .link import DeviceError, LinkError
 
 MM_PER_INCH = 25.4
 
@@ -89,6 +89,7 @@ class Printer:
         self.link = device.link
         self.profile = device.profile
         self.on_status = on_status or (lambda st: None)   # every status read is reported
+        self._config_held = 0          # head-configuration digits the printer acknowledged
 
     # -- identity and state -------------------------------------------------------------
     def connect(self) -> dict:
@@ -164,7 +165,13 @@ class Printer:
         True when it was loaded."""
         if not force and self.status().flags & P.FLAG_HEADS_CONFIGURED:
             return False
-        self.device.load_head_config()
+        try:
+            self.device.load_head_config(resume_from=self._config_held)
+        except LinkError as exc:
+            # a noisy line: the next call (after a reconnect) goes on from what was held
+            self._config_held = getattr(exc, "config_held", 0)
+            raise
+        self._config_held = 0
         return True
 
     def home(self, wait: bool = True) -> None:
