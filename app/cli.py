@@ -350,7 +350,18 @@ def cmd_devices(args) -> int:
     return EXIT_OK
 
 
+def cmd_completion(args) -> int:
+    """The completion script, generated from this very parser by shtab."""
+    import shtab
+    try:
+        print(shtab.complete(build_parser(), shell=args.shell))
+    except BrokenPipeError:        # `| head`: the reader has what it wanted
+        pass
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from . import devices
     from .. import __version__
     ap = argparse.ArgumentParser(prog="wideprint", description="RIP and driver for the "
                                  "3.4 m CMYK solvent printer (8 x Xaar XJ128), with its emulator.")
@@ -361,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("print", help="rip and print files")
     p.add_argument("files", nargs="+", metavar="FILE", help="images (TIFF/BMP/JPEG) or folders")
     p.add_argument("--device", default="emulator",
-                   help="'emulator' (in-process) or serial=PORT,data=tcp://HOST:PORT")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--media-out", metavar="MEDIA.tif",
                    help="emulator only: write the printed media (with several files: -N suffix or {job})")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
@@ -390,6 +401,13 @@ def build_parser() -> argparse.ArgumentParser:
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report
+
+    p = sub.add_parser("completion", help="print a shell completion script (bash, zsh, tcsh)",
+                       description="Shell completion for wideprint, e.g. "
+                       "`wideprint completion bash > /etc/bash_completion.d/wideprint` or "
+                       "`source <(wideprint completion bash)`.")
+    p.add_argument("shell", choices=("bash", "zsh", "tcsh"))
+    p.set_defaults(func=cmd_completion)
 
     from .printer_cli import add_parser as add_printer_parser
     add_printer_parser(sub)       # printer status|home|park|feed|measure|clear-fault

@@ -18,6 +18,7 @@ ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault")
 
 
 def add_parser(sub) -> None:
+    from . import devices
     p = sub.add_parser("printer", help="printer status and machine commands (home, park, "
                        "feed, measure the paper, clear a fault)",
                        description="Status and machine commands of one printer, through the "
@@ -25,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("action", choices=ACTIONS)
     p.add_argument("mm", nargs="?", type=float, help="feed: millimetres of paper (negative: back)")
     p.add_argument("--device", default="emulator",
-                   help="'emulator', 'emulator-usb' or serial=PORT,data=URL (docs/driver.md)")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE",
                    help="emulator fault (docs/emulator.md)")

@@ -9,13 +9,16 @@ commands on their own.
 from __future__ import annotations
 
 import argparse
-import http.client
 import json
 import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
+
+if TYPE_CHECKING:
+    import http.client
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SERVER = 0, 1, 2, 3
 
@@ -52,6 +55,7 @@ class Client:
         self._conn: http.client.HTTPConnection | None = None
 
     def _connection(self) -> http.client.HTTPConnection:
+        import http.client                  # here: the CLI's --help does not need it
         if self._conn is None:
             self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
         return self._conn
@@ -68,6 +72,7 @@ class Client:
         if isinstance(body, (dict, list)):
             body = json.dumps(body).encode()
             hdrs["Content-Type"] = "application/json"
+        import http.client
         for attempt in (0, 1):
             conn = self._connection()
             try:
@@ -435,12 +440,13 @@ def _client_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
 def add_parser(sub) -> None:
     """Add serve, submit, queue, cancel, hold, release, requeue, status, presets and report
     to the `wideprint` command's subparsers."""
+    from . import devices
     from .server.config import DEFAULT_PORT
     from ..rip.settings import add_arguments as add_settings_arguments
 
     p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
     p.add_argument("--device", default="emulator",
-                   help="'emulator' (in-process) or serial=PORT,data=URL (docs/driver.md)")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     _state_dir_option(p)
     p.add_argument("--media-dir", metavar="DIR",
                    help="in-process emulator: write each job's media as DIR/job-ID.tif")

@@ -34,6 +34,7 @@ from .api import ApiHandler, _HTTPServer
 from .config import CHUNK, IMAGE_SUFFIXES, SERVER_FILE, ServerConfig, _fsync_dir, ensure_token
 from .hotfolders import HotFolders
 from .presets import Presets
+from .sdnotify import notify
 from .spool import Spool
 from .validate import Invalid
 from .worker import Worker
@@ -301,7 +302,9 @@ def serve(config: ServerConfig, ready=None) -> int:
         print(f"wideprint serve: job {job['id']}: {job['message']}", flush=True)
     if ready:
         ready(server)
+    notify(READY=1, STATUS=f"serving {server.url}")       # systemd Type=notify
     while not done.wait(1.0):
         pass
+    notify(STOPPING=1, STATUS="stopping: the printing job pauses at its next boundary")
     server.stop()
     return 0
