@@ -50,6 +50,12 @@ class Fpga:
     def pass_id(self) -> int:
         return self._pair(P.REG_PASS_LO)
 
+    def clear_stroke(self) -> None:
+        """A new job: no stroke yet (the stroke registers read NO_STROKE, nothing fired)."""
+        self.regs[P.REG_PASS_LO] = P.NO_STROKE & 0xFFFF
+        self.regs[P.REG_PASS_HI] = P.NO_STROKE >> 16
+        self.fired = 0
+
     @property
     def fire_start(self) -> int:
         v = self._pair(P.REG_FIRE_START_LO)

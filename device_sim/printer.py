@@ -460,6 +460,10 @@ class Printer:
             return                      # the host reconnected and said it again
         if self.media:
             self.media.close()
+        # a new job starts with no stroke of its own: an earlier job's last stroke (same
+        # number, same fire count) must not look like this job's (docs/protocol.md JOB_BEGIN)
+        self.line_done = False
+        self.fpga.clear_stroke()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
                         y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
         path = self.media_path(job) if callable(self.media_path) else self.media_path
@@ -480,6 +484,17 @@ class Printer:
                          lead_mm=round(self.job["y0"] * self.job["row_nm"] / 1e6, 3))
             self.jobs_done[job] = stats
             self.log("job_end", job=job, **stats)
+        self.media = None
+        self.job = None
+
+    def abandon_job(self) -> None:
+        """The host gave up on the open job (it failed or was cancelled and will not be
+        resumed): its media file is completed with what landed and blank paper after it,
+        so what the printer did can be inspected (app/api.py)."""
+        if self.media:
+            self.media.close()
+            self.log("job_abandoned", job=self.job["job"] if self.job else None,
+                     drops=[int(d) for d in self.media.drops])
         self.media = None
         self.job = None
 

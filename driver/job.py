@@ -296,9 +296,19 @@ class PrintJob:
                         + (f" (the serial line's measured bit error rate is {ber:.1e})" if ber else ""))
 
     def print_pass(self, pd: PassData, x0: int) -> None:
-        self._recovering(lambda: self._print_pass_once(pd, x0), f"pass {pd.index}")
+        # The printer's status may show this stroke as running or done only if this job
+        # sent it before: after a lost link (a retry here) or a restart (the first stroke
+        # of a resumed job).  A fresh stroke always starts anew, even when the status shows
+        # an earlier job's stroke with the same number and fire count.
+        tries = [self.resume is not None and pd.index == self.resume.get("next_pass")]
 
-    def _print_pass_once(self, pd: PassData, x0: int) -> None:
+        def once():
+            picked_up = tries[0]
+            tries[0] = True
+            self._print_pass_once(pd, x0, picked_up)
+        self._recovering(once, f"pass {pd.index}")
+
+    def _print_pass_once(self, pd: PassData, x0: int, may_be_started: bool = True) -> None:
         link, prof = self.dev.link, self.profile
         dpi = self.rip.settings.dpi
         k = prof.k(dpi)
@@ -308,11 +318,11 @@ class PrintJob:
                                 info.get("block_fires", prof.block_fires),
                                 info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         st = link.status()
-        if st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
+        if may_be_started and st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
                 st.flags & P.FLAG_LINE_DONE and st.fires_done == pd.fires:
             link.write_reg(P.REG_WE_EN, 0)          # it finished while we were away
             return
-        if st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
+        if may_be_started and st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
             streamer.resume()                       # the line is running or starved: feed it
         else:
             speed, accel = self.line_speed(), prof.accel_counts_s2()

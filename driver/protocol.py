@@ -39,6 +39,9 @@ SUPPORTED_BAUDS = (57600, 115200, 230400, 460800, 921600)
 MAX_TRIES = 3               # seed 004: three consecutive failures abandon and report
 
 
+NO_STROKE = 0xFFFFFFFF      # GET_STATUS stroke id after JOB_BEGIN, before the job's first line
+
+
 class Kind(enum.IntEnum):
     COMMAND = 0x43   # 'C' host -> DSP
     RESPONSE = 0x52  # 'R' DSP -> host, same SEQ as the command it answers
