@@ -200,6 +200,15 @@ class Printer:
                   max_rate=int(f.max_steps_s), accel=int(f.accel_steps_s2))
         return self.wait_idle("feeding paper") if wait else None
 
+    def feed_to(self, target_steps: int) -> P.Status:
+        """Feed the paper to an absolute position (stepper steps since power-up).  Safe to
+        repeat after a lost answer: the move is computed from where the paper is."""
+        st = self.status()
+        if st.paper_steps != target_steps:
+            self.feed_steps(target_steps - st.paper_steps, wait=False)
+            st = self.wait_idle("feeding paper")
+        return st
+
     def feed(self, mm: float, wait: bool = True) -> int:
         """Feed the paper by `mm` millimetres; the steps made."""
         steps = int(round(mm * 1000 / self.profile.feed_um_per_step))
