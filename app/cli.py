@@ -24,10 +24,10 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
 def _emulator_outputs(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vcd", metavar="FILE.vcd", help="emulator: waveform of the head interface "
                    "and encoder for --vcd-window (GTKWave)")
-    p.add_argument("--vcd-window", default="0:0:0:8", metavar="PASS:HEAD:FIRST:COUNT",
+    p.add_argument("--vcd-window", default="0:0:0:8", metavar="STROKE:HEAD:FIRST:COUNT",
                    help="which fires go into the VCD (head index 0-7; default 0:0:0:8)")
     p.add_argument("--latched-out", metavar="FILE.npz",
-                   help="emulator: the 128-bit words every head latched, per pass")
+                   help="emulator: the 128-bit words every head latched, per stroke")
 
 
 def _emulator_options(args) -> dict:
@@ -37,7 +37,7 @@ def _emulator_options(args) -> dict:
             window = tuple(int(v) for v in args.vcd_window.split(":"))
             assert len(window) == 4
         except (ValueError, AssertionError):
-            raise ValueError(f"--vcd-window {args.vcd_window!r}: expected PASS:HEAD:FIRST:COUNT") from None
+            raise ValueError(f"--vcd-window {args.vcd_window!r}: expected STROKE:HEAD:FIRST:COUNT") from None
         opts.update(vcd_path=args.vcd, vcd_window=window)
     if getattr(args, "latched_out", None):
         opts["record_latched"] = True
@@ -45,7 +45,7 @@ def _emulator_options(args) -> dict:
 
 
 def _save_latched(printer, path: str) -> None:
-    np_arrays = {f"pass{p}": printer.latched_words(p) for p in sorted(printer.latched)}
+    np_arrays = {f"stroke{i}": printer.latched_words(i) for i in sorted(printer.latched)}
     import numpy as np
     np.savez_compressed(path, **np_arrays)
 
@@ -172,8 +172,9 @@ def cmd_print(args) -> int:
             label = f"{i + 1}/{len(files)} {Path(f).name}"
 
             def on_event(kind, label=label, job_id=i + 1, file=f, **kw):
-                if kind == "pass":                      # a progress bar on a terminal
-                    progress(kw["index"], kw["total"], f"{label} pass {kw['index'] + 1}")
+                if kind == "stroke":                    # a progress bar on a terminal
+                    progress(kw["index"], kw["total"],
+                             f"{label} stroke {kw['index'] + 1} of {kw['total']}")
                 if log_json is not None:                # structured log: one JSON object a line
                     import dataclasses
                     data = {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v)
@@ -194,7 +195,7 @@ def cmd_print(args) -> int:
                 if dev.emulator is not None:
                     stats = dev.emulator.jobs_done.get(i + 1, {})
                     rep["stray_drops"] = stats.get("stray")
-                print(f"{f}: printed {rep['passes_printed']} passes, "
+                print(f"{f}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
@@ -254,7 +255,7 @@ def cmd_test_print(args) -> int:
         if args.preview and args.media_out:
             from ..rip.planes import write_preview
             write_preview(args.media_out, args.preview)
-        print(f"{args.pattern}: printed {rep.passes_printed} passes, {job.width} x {job.height} dots"
+        print(f"{args.pattern}: printed {rep.strokes_printed} strokes, {job.width} x {job.height} dots"
               + (f" -> {args.media_out}" if args.media_out else ""))
         return EXIT_OK
     except JobError as exc:
@@ -396,7 +397,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
     p.add_argument("--log-json", metavar="JSONL",
-                   help="structured job log: states, passes, status, recoveries (JSON lines)")
+                   help="structured job log: states, strokes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
     _rip_options(p)
     p.set_defaults(func=cmd_print)

@@ -310,12 +310,12 @@ def cmd_queue(args) -> int:
     if not jobs:
         print("the queue is empty" + ("" if args.all else " (--all shows finished jobs)"))
         return EXIT_OK
-    print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'PASSES':>9} {'COPIES':>6} "
+    print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'STROKES':>9} {'COPIES':>6} "
           f"{'PRESET':10} {'SOURCE':12} {'SUBMITTED':9} NAME / MESSAGE")
     for j in jobs:
-        passes = f"{j['passes_done']}/{j['passes_total']}" if j["passes_total"] else ""
+        strokes = f"{j['strokes_done']}/{j['strokes_total']}" if j["strokes_total"] else ""
         print(f"{j['id']:>6} {j['state']:9} {j.get('position') or '':>4} {j['priority']:>4} "
-              f"{passes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
+              f"{strokes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
               f"{j['source']:12.12} {_age(j['submitted']):9} {j['name']}"
               + (f" (attempt {j['attempt']})" if j.get("attempt", 1) > 1 else "")
               + (f"  [{j['message']}]" if j["message"] else ""))
@@ -366,8 +366,8 @@ def cmd_status(args) -> int:
               + (f"; NOT RE-READ: {pr['error']}" if pr["error"] else ""))
     if cur:
         print(f"current  job {cur['id']} {cur['name']}: {cur['state']}"
-              f"{' ' + cur['detail'] if cur['detail'] else ''}, pass "
-              f"{cur['passes_printed']}/{cur['passes_total']}, copy {cur['copy']}/{cur['copies']}"
+              f"{' ' + cur['detail'] if cur['detail'] else ''}, stroke "
+              f"{cur['strokes_printed']}/{cur['strokes_total']}, copy {cur['copy']}/{cur['copies']}"
               + (" (resumed)" if cur.get("resumed") else ""))
     return EXIT_OK
 
@@ -414,11 +414,11 @@ def cmd_report(args) -> int:
     import csv
     import io
     rows = list(csv.DictReader(io.StringIO(text)))
-    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'PASSES':>7} {'M2':>9} {'INK ML':>10} "
+    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'STROKES':>7} {'M2':>9} {'INK ML':>10} "
           f"{'SECONDS':>8}  FILE")
     for r in rows:
         print(f"{r['job_id']:>5} {r['copy']:>4} {r['outcome']:9} "
-              f"{r['passes_printed'] + '/' + r['passes_total']:>7} {float(r['area_m2']):9.4f} "
+              f"{r['strokes_printed'] + '/' + r['strokes_total']:>7} {float(r['area_m2']):9.4f} "
               f"{float(r['ink_total_ml']):10.5f} {float(r['duration_s']):8.1f}  {r['file']}")
     return EXIT_OK
 
@@ -458,7 +458,7 @@ def add_parser(sub) -> None:
                    help=f"API port (default {DEFAULT_PORT}; 0 = any free port)")
     p.add_argument("--on-crash", choices=("resume", "hold"), default="resume",
                    help="a job that was printing when the server died: resume it at its "
-                        "first unfinished pass (default), or hold it for the operator")
+                        "first unfinished stroke (default), or hold it for the operator")
     p.add_argument("--max-file-size", type=int, metavar="BYTES",
                    help="largest file accepted (default 4 GiB)")
     p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",

@@ -5,7 +5,7 @@ the CLI, the GUI, CUPS and hot folders are its clients.  One module per concern:
     validate    what a request may contain (settings: the one schema, rip/settings.py)
     presets     settings presets, re-read without a restart
     spool       the persistent queue and the accounting rows (SQLite, WAL)
-    worker      prints queued jobs on the printer, checkpoint after every pass
+    worker      prints queued jobs on the printer, checkpoint after every stroke
     hotfolders  folders whose files become jobs
     api         the local HTTP/JSON API
     accounting  CSV of printed copies

@@ -5,8 +5,8 @@ One process owns the printer (one Device, re-opened after link errors) and its q
 
 - the API: HTTP/JSON on 127.0.0.1 with a bearer token (`ApiHandler`);
 - the worker: prints queued jobs one at a time in queue order, persisting the job's
-  checkpoint after every pass, so a server killed mid-job resumes it at its first
-  unfinished pass (or holds it, `--on-crash hold`);
+  checkpoint after every stroke, so a server killed mid-job resumes it at its first
+  unfinished stroke (or holds it, `--on-crash hold`);
 - the hot-folder scanner: one folder per preset; a completely written file becomes a job,
   and moves to done/ or failed/ (with NAME.reason.txt) when the job ends.
 
@@ -188,7 +188,7 @@ class PrintServer:
     def public(self, job: dict, positions: dict | None = None) -> dict:
         d = {k: v for k, v in job.items() if k not in ("spool_path", "checkpoint", "key")}
         cp = job.get("checkpoint")
-        d["next_pass"] = cp.get("next_pass") if cp else None
+        d["next_stroke"] = cp.get("next_stroke") if cp else None
         if positions is not None:
             d["position"] = positions.get(job["id"])
         return d
@@ -285,7 +285,7 @@ def _version() -> str:
 
 
 def serve(config: ServerConfig, ready=None) -> int:
-    """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next pass
+    """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next stroke
     boundary and resumed by the next start."""
     server = PrintServer(config)
     server.start()

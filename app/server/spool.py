@@ -51,9 +51,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     started      REAL,
     finished     REAL,
     copy_started REAL,                        -- start of the copy now printing
-    passes_total INTEGER NOT NULL DEFAULT 0,
-    passes_done  INTEGER NOT NULL DEFAULT 0,
-    checkpoint   TEXT,                        -- JSON: x0, paper0, next_pass, epoch
+    strokes_total INTEGER NOT NULL DEFAULT 0, -- carriage strokes of the copy printing
+    strokes_done INTEGER NOT NULL DEFAULT 0,
+    checkpoint   TEXT,                        -- JSON: x0, paper0, next_stroke, epoch, copy
     attempt      INTEGER NOT NULL DEFAULT 1   -- 1, then +1 each time the operator requeues it
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
@@ -68,8 +68,8 @@ CREATE TABLE IF NOT EXISTS prints (
     started        REAL NOT NULL,
     ended          REAL NOT NULL,
     duration_s     REAL NOT NULL,
-    passes_total   INTEGER NOT NULL,
-    passes_printed INTEGER NOT NULL,
+    strokes_total  INTEGER NOT NULL,
+    strokes_printed INTEGER NOT NULL,
     drops_c INTEGER NOT NULL, drops_m INTEGER NOT NULL,
     drops_y INTEGER NOT NULL, drops_k INTEGER NOT NULL,
     ink_c_ml REAL NOT NULL, ink_m_ml REAL NOT NULL,
@@ -87,10 +87,16 @@ CREATE TABLE IF NOT EXISTS prints (
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
 """
 
-SCHEMA_VERSION = "2"
+SCHEMA_VERSION = "3"
 # columns added since schema 1: (table, column, definition), added to older databases
 ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"))
+# columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
+# carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
+RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
+                   ("jobs", "passes_done", "strokes_done"),
+                   ("prints", "passes_total", "strokes_total"),
+                   ("prints", "passes_printed", "strokes_printed"))
 
 
 class SpoolError(Exception):
@@ -105,7 +111,9 @@ def _job_dict(row: sqlite3.Row) -> dict:
     d = dict(row)
     d["settings"] = json.loads(d["settings"])
     cp = d.pop("checkpoint")
-    d["checkpoint"] = json.loads(cp) if cp else None
+    d["checkpoint"] = cp = json.loads(cp) if cp else None
+    if cp is not None and "next_pass" in cp and "next_stroke" not in cp:
+        cp["next_stroke"] = cp.pop("next_pass")      # saved by schema 2: the same number
     d["interrupted"] = bool(d["interrupted"])
     return d
 
@@ -128,6 +136,10 @@ class Spool:
                 have = {r[1] for r in c.execute(f"PRAGMA table_info({table})")}
                 if column not in have:
                     c.execute(f"ALTER TABLE {table} ADD COLUMN {column} {definition}")
+            for table, old, new in RENAMED_COLUMNS:
+                have = {r[1] for r in c.execute(f"PRAGMA table_info({table})")}
+                if old in have and new not in have:
+                    c.execute(f"ALTER TABLE {table} RENAME COLUMN {old} TO {new}")
             c.execute("INSERT OR REPLACE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
             c.execute("INSERT OR IGNORE INTO meta VALUES ('printer_epoch', '0')")
 
@@ -242,7 +254,7 @@ class Spool:
             if cp is None:
                 epoch += 1
                 c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
-                c.execute("UPDATE jobs SET checkpoint=NULL, passes_done=0, copy_started=? "
+                c.execute("UPDATE jobs SET checkpoint=NULL, strokes_done=0, copy_started=? "
                           "WHERE id=?", (now, job_id))
             c.execute("UPDATE jobs SET state='printing', started=COALESCE(started, ?), "
                       "copy_started=COALESCE(copy_started, ?), message='' WHERE id=?",
@@ -252,12 +264,12 @@ class Spool:
         job["epoch"] = epoch
         return job
 
-    def save_checkpoint(self, job_id: int, checkpoint: dict, passes_total: int) -> None:
-        """After every pass: where a restarted server resumes this job."""
+    def save_checkpoint(self, job_id: int, checkpoint: dict, strokes_total: int) -> None:
+        """After every stroke: where a restarted server resumes this job."""
         with self.tx() as c:
-            c.execute("UPDATE jobs SET checkpoint=?, passes_done=?, passes_total=? WHERE id=?",
-                      (json.dumps(checkpoint, sort_keys=True), int(checkpoint.get("next_pass", 0)),
-                       passes_total, job_id))
+            c.execute("UPDATE jobs SET checkpoint=?, strokes_done=?, strokes_total=? WHERE id=?",
+                      (json.dumps(checkpoint, sort_keys=True),
+                       int(checkpoint.get("next_stroke", 0)), strokes_total, job_id))
 
     def copy_done(self, job_id: int) -> dict:
         """One copy printed: the next copy starts afresh."""
@@ -272,7 +284,7 @@ class Spool:
         with self.tx() as c:
             epoch = int(c.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0]) + 1
             c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
-            c.execute("UPDATE jobs SET copy_started=?, passes_done=0 WHERE id=?", (now, job_id))
+            c.execute("UPDATE jobs SET copy_started=?, strokes_done=0 WHERE id=?", (now, job_id))
 
     def finish(self, job_id: int, state: str, message: str = "", keep_copy: bool = False) -> dict:
         """The job ended.  keep_copy: its spool copy stays (a failed or cancelled job the
@@ -336,7 +348,7 @@ class Spool:
 
     def requeue(self, job_id: int) -> dict:
         """The operator puts a failed or cancelled job back in the queue (docs/server.md,
-        "Requeue"): a fresh print of its spooled copy, from its first pass, with the same
+        "Requeue"): a fresh print of its spooled copy, from its first stroke, with the same
         settings, preset, copies and priority, as attempt N+1.  Its `prints` rows stay."""
         with self.tx() as c:
             job = self._get_for_change(c, job_id)
@@ -360,7 +372,7 @@ class Spool:
             # hot_path: the original already went to failed/ with the first attempt's reason;
             # the new attempt moves no hot-folder file (a new file of that name is a new job)
             c.execute("UPDATE jobs SET state='queued', attempt=attempt+1, message='', "
-                      "copies_done=0, passes_done=0, passes_total=0, checkpoint=NULL, "
+                      "copies_done=0, strokes_done=0, strokes_total=0, checkpoint=NULL, "
                       "interrupted=0, started=NULL, finished=NULL, copy_started=NULL, "
                       "hot_path=NULL WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
@@ -383,14 +395,14 @@ class Spool:
 
     def recover(self, on_crash: str) -> list[dict]:
         """At start-up: jobs left `printing` by a server that died.  `resume`: back to the
-        head of the queue, resumed at their first unfinished pass; `hold`: held for the
+        head of the queue, resumed at their first unfinished stroke; `hold`: held for the
         operator (release resumes them if nothing else printed since)."""
         out = []
         with self.tx() as c:
             for row in c.execute("SELECT * FROM jobs WHERE state='printing'").fetchall():
                 job = _job_dict(row)
                 cp = job["checkpoint"] or {}
-                at = f"pass {cp['next_pass']}" if "next_pass" in cp else "the start"
+                at = f"stroke {cp['next_stroke']}" if "next_stroke" in cp else "the start"
                 if on_crash == "hold":
                     msg = (f"interrupted (server stopped) before {at}; held: release to "
                            f"resume there, or cancel")
