@@ -71,8 +71,11 @@ class LineRun:
                                  else (pos <= inj.encoder_glitch_at))
             if hit.size:
                 self._stop_at(int(hit[0]), P.Fault.ENCODER)
-        for name, stroke in inj.overtemp:
+        for name, stroke in list(inj.overtemp):
             if stroke == self.stroke:
+                # the head overheats once, half-way through this line; cleared, it has
+                # cooled (Printer.clear_fault), so the stroke resumed after it runs through
+                inj.overtemp.remove((name, stroke))
                 self._stop_at(self.n // 2, P.Fault.HEAD_OVERTEMP, pr.head_index(name))
         if self.n > 1:
             period = np.diff(self.t_fire)

@@ -314,9 +314,6 @@ class PrintJob:
         k = prof.k(dpi)
         first = x0 // k + stroke.first_column
         info = self.dev.info or {}
-        streamer = StrokeStreamer(self.dev.data, stroke.index, stroke.words,
-                                  info.get("block_fires", prof.block_fires),
-                                  info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         st = link.status()
         # The stroke registers may still describe another job's (or copy's) last line with
         # the same number and length: only a line this job started (before a lost link),
@@ -327,13 +324,28 @@ class PrintJob:
                 st.flags & P.FLAG_LINE_DONE and st.fires_done == stroke.fires:
             link.write_reg(P.REG_WE_EN, 0)          # it finished while we were away
             return
+        # A resumed job whose stroke a printer fault stopped part-way (the fault cleared
+        # since): the columns fired stay printed, the line goes on from the next one
+        # (docs/driver.md, "Resuming after a fault").
+        done = st.fires_done if (ours and st.stroke == stroke.index and st.motion == P.Motion.IDLE
+                                 and 0 < st.fires_done < stroke.fires) else 0
+        fires = stroke.fires - done
+        streamer = StrokeStreamer(self.dev.data, stroke.index, stroke.words[:, done:],
+                                  info.get("block_fires", prof.block_fires),
+                                  info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         if ours and st.stroke == stroke.index and st.motion == P.Motion.PRINTING:
             streamer.resume()                       # the line is running or starved: feed it
         else:
             self._started.add(stroke.index)
+            if done:
+                log.info("stroke %d: resuming after column %d of %d", stroke.index, done, stroke.fires)
+                self.on_event("stroke_resumed", index=stroke.index, fires_done=done)
+            # forward strokes fire their columns upwards, reverse ones downwards: the columns
+            # left are the top ones going forward and the bottom ones going back
+            start = first + done if stroke.direction == 0 else first
             speed, accel = self.line_speed(), prof.accel_counts_s2()
             link.call(P.Op.SET_LINE, stroke=stroke.index, direction=stroke.direction, dpi=dpi,
-                      fire_start=first, fire_count=stroke.fires, speed=speed, accel=accel)
+                      fire_start=start, fire_count=fires, speed=speed, accel=accel)
             link.write_reg(P.REG_DIR, 1 if stroke.direction == 0 else 0)
             link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
             link.write_reg(P.REG_WE_EN, 1)
@@ -346,8 +358,8 @@ class PrintJob:
             streamer.stop()
         if streamer.error is not None:
             raise StreamError(str(streamer.error))
-        if st.fires_done != stroke.fires:
-            raise JobError(f"stroke {stroke.index}: {st.fires_done} of {stroke.fires} columns fired")
+        if st.fires_done != fires:
+            raise JobError(f"stroke {stroke.index}: {st.fires_done} of {fires} columns fired")
         link.write_reg(P.REG_WE_EN, 0)
         if streamer.min_fifo_words is not None:
             m = self.report.min_fifo_words
