@@ -209,6 +209,10 @@ def cmd_serve(args) -> int:
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.WARNING,
                             format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if not (args.settle_time >= 0 and args.api_timeout > 0 and args.api_connections > 0):
+        print("wideprint serve: --settle-time must be 0 or more, --api-timeout and "
+              "--api-connections positive", file=sys.stderr)
+        return EXIT_USAGE
     if args.max_file_size is not None and args.max_file_size <= 0:
         print("wideprint serve: --max-file-size must be positive", file=sys.stderr)
         return EXIT_USAGE
@@ -217,7 +221,8 @@ def cmd_serve(args) -> int:
                        hot_folder_root=Path(args.hot_folder_root) if args.hot_folder_root else None,
                        host=args.host, port=args.port, on_crash=args.on_crash,
                        scan_interval=args.scan_interval, start_paused=args.paused,
-                       profile_path=args.profile)
+                       profile_path=args.profile, settle_s=args.settle_time,
+                       api_timeout_s=args.api_timeout, api_max_connections=args.api_connections)
     if args.max_file_size is not None:
         cfg.max_file_bytes = args.max_file_size
     if args.keep_failed is not None:
@@ -441,7 +446,8 @@ def add_parser(sub) -> None:
     """Add serve, submit, queue, cancel, hold, release, requeue, status, presets and report
     to the `wideprint` command's subparsers."""
     from . import devices
-    from .server.config import DEFAULT_PORT
+    from .server.config import (DEFAULT_API_CONNECTIONS, DEFAULT_API_TIMEOUT_S, DEFAULT_PORT,
+                                DEFAULT_SETTLE_S)
     from ..rip.settings import add_arguments as add_settings_arguments
 
     p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
@@ -463,6 +469,15 @@ def add_parser(sub) -> None:
                    help="largest file accepted (default 4 GiB)")
     p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",
                    help="hot-folder scan interval (default 1 s)")
+    p.add_argument("--settle-time", type=float, default=DEFAULT_SETTLE_S, metavar="S",
+                   help="a hot-folder file unchanged this long, and open for writing by "
+                        f"nobody, is complete (default {DEFAULT_SETTLE_S:g} s)")
+    p.add_argument("--api-timeout", type=float, default=DEFAULT_API_TIMEOUT_S, metavar="S",
+                   help="close API connections silent this long (default "
+                        f"{DEFAULT_API_TIMEOUT_S:g} s)")
+    p.add_argument("--api-connections", type=int, default=DEFAULT_API_CONNECTIONS, metavar="N",
+                   help=f"API connections served at once; more get 503 (default "
+                        f"{DEFAULT_API_CONNECTIONS})")
     p.add_argument("--keep-failed", type=float, metavar="DAYS",
                    help="keep the spooled files of failed and cancelled jobs this long, so "
                         "they can be requeued (default 7; 0 = delete them at once)")

@@ -173,7 +173,7 @@ def srv(tmp_path_factory):
     root = tmp_path_factory.mktemp("server")
     cfg = ServerConfig(device="emulator", state_dir=root / "state", media_dir=root / "media",
                        hot_folder_root=root / "hot", port=0, scan_interval=0.2,
-                       max_file_bytes=2_000_000)
+                       settle_s=1.0, max_file_bytes=2_000_000)
     server = PrintServer(cfg)
     server.start()
     server.root = root
@@ -785,8 +785,8 @@ def test_presets_reread_when_the_file_changes_and_a_broken_file_is_refused(tmp_p
     from wideprint.app.server import DEFAULT_PRESETS, PrintServer, ServerConfig
     state, hot = tmp_path / "state", tmp_path / "hot"
     server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
-                                      hot_folder_root=hot, scan_interval=0.1, start_paused=True,
-                                      media_dir=tmp_path / "media"))
+                                      hot_folder_root=hot, scan_interval=0.1, settle_s=0.5,
+                                      start_paused=True, media_dir=tmp_path / "media"))
     server.start()
     c = Client(state)
     try:

@@ -69,7 +69,7 @@ class PrintServer:
         if config.host not in ("127.0.0.1", "localhost", "::1"):
             log.warning("the API listens on %s, beyond this machine: anyone with the token "
                         "can print", config.host)
-        self.http = _HTTPServer((config.host, config.port), handler)
+        self.http = _HTTPServer((config.host, config.port), handler, config.api_max_connections)
         self.port = self.http.server_address[1]
         self.url = f"http://{config.host}:{self.port}"
         self._http_thread = threading.Thread(target=self.http.serve_forever, name="wideprint-api",
@@ -139,12 +139,33 @@ class PrintServer:
         self.worker.interrupt(timeout)
         self.http.shutdown()
         self.http.server_close()
+        if self.hot:
+            self.hot.close()
         try:
             (self.state_dir / SERVER_FILE).unlink()
         except OSError:
             pass
 
     # -- intake -------------------------------------------------------------------------------
+    def queue_file(self, src, name: str, size: int, *, exact: bool = False, check=None,
+                   **fields) -> tuple[dict, bool]:
+        """Copy a file into the spool and queue it as a job: (job, created).  The copy is
+        owned by the job, or deleted before this returns or raises — whatever fails (the
+        copy, `check()` after it, the database), no spool file is left without a job.
+        A duplicate key returns the job already queued, and its copy is deleted too."""
+        spool_path, n, digest = self.spool_copy(src, name, size, exact=exact)
+        try:
+            if check is not None:
+                check()
+            job, created = self.spool.add_job(name=name, spool_path=spool_path, size=n,
+                                              sha256=digest, **fields)
+        except BaseException:
+            _unlink(spool_path)
+            raise
+        if not created:
+            _unlink(spool_path)
+        return job, created
+
     def spool_copy(self, src, name: str, size: int, exact: bool = False) -> tuple[str, int, str]:
         """Copy a submitted file into the spool (fsync'd): returns (path, size, sha256).
         exact: read exactly `size` bytes (an upload); otherwise to EOF, refusing more than
@@ -241,18 +262,13 @@ class PrintServer:
         return job
 
     def hot_done(self, job: dict, state: str, message: str) -> None:
-        """A hot-folder job ended: its original goes to done/ or failed/ (with reason)."""
+        """A hot-folder job ended: its original goes to done/ or failed/ (with reason),
+        reached from the hot-folder root's descriptor only (HotFolders.finish)."""
         hot = job.get("hot_path")
         if not hot or not self.hot:
             return
-        src = Path(hot)
-        if not src.exists():
-            return
-        with self.hot.lock:
-            if state == "done":
-                HotFolders.move(src, src.parent / "done")
-            else:
-                HotFolders.move(src, src.parent / "failed", f"job {job['id']} {state}: {message}")
+        self.hot.finish(hot, state, None if state == "done"
+                        else f"job {job['id']} {state}: {message}")
 
     def status(self) -> dict:
         w = self.worker
@@ -274,6 +290,15 @@ class PrintServer:
 
     def report_csv(self, job_id: int | None = None) -> str:
         return prints_csv(self.spool.prints(job_id))
+
+
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        log.warning("cannot delete %s: %s", path, exc.strerror)
 
 
 def _version() -> str:
