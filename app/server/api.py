@@ -420,8 +420,32 @@ class ApiHandler(BaseHTTPRequestHandler):
                 if not isinstance(body, dict) or set(body) - {"paused"} or \
                         not isinstance(body.get("paused"), bool):
                     raise Invalid('expected {"paused": true|false}')
-                self.srv.worker.set_paused(body["paused"], "paused by the operator")
+                for w in self.srv.workers.values():       # the whole queue: every printer
+                    if not w.fault:                       # a fault stays until cleared
+                        w.set_paused(body["paused"], "paused by the operator")
                 return self._json(200, self.srv.status())
+            if method == "GET" and route == ["printers"]:
+                self._query(url.query, ())
+                return self._json(200, {"printers": self.srv.printers()})
+            if method == "POST" and route == ["estop"]:
+                self._query(url.query, ())
+                return self._json(200, {"stopped": self.srv.estop()})
+            if len(route) == 3 and route[0] == "printers" and method == "POST":
+                self._query(url.query, ())
+                name, what = route[1], route[2]
+                worker = self.srv.printer_worker(name)
+                if what == "clear-fault":
+                    if not isinstance(body, dict) or set(body) - {"then"}:
+                        raise Invalid('expected {"then": "resume"|"fail"}')
+                    return self._json(200, self.srv.clear_fault(name, body.get("then", "resume")))
+                if what in ("pause", "resume"):
+                    if body:
+                        raise Invalid(f"{what} takes no parameters")
+                    if what == "resume" and worker.fault:
+                        raise Invalid(f"printer {name} has a fault ({worker.fault}): clear it "
+                                      f"(resume or fail its job)", 409)
+                    worker.set_paused(what == "pause", "paused by the operator")
+                    return self._json(200, {"printers": self.srv.printers()})
             if len(route) >= 2 and route[0] == "jobs":
                 job_id = parse_number(route[1])
                 if job_id is None:
@@ -438,6 +462,11 @@ class ApiHandler(BaseHTTPRequestHandler):
                     pr = _check_int("priority", body["priority"], *PRIORITY_RANGE)
                     job = self.srv.spool.set_priority(job_id, pr)
                     return self._json(200, {"job": self.srv.public(job)})
+                if method == "POST" and len(route) == 3 and route[2] == "move":
+                    if not isinstance(body, dict) or set(body) != {"printer"} or \
+                            not isinstance(body["printer"], (str, type(None))):
+                        raise Invalid('expected {"printer": NAME|"any"}')
+                    return self._json(200, {"job": self.srv.public(self.srv.move(job_id, body["printer"]))})
                 if method == "POST" and len(route) == 3 and route[2] in ("cancel", "hold", "release",
                                                                           "requeue"):
                     if body:
@@ -470,7 +499,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                 raw = loads(headers[0])
             except ValueError as exc:
                 raise Invalid(f"bad JSON in X-Wideprint-Job: {exc}") from None
-            req = validate_job_request(raw, srv.presets, srv.profile, srv.state_dir / "icc")
+            req = validate_job_request(raw, srv.presets, srv.profile, srv.state_dir / "icc",
+                                       printers=tuple(srv.workers))
             size = self._length
             if size is None:
                 raise Invalid("Content-Length is required", 411)
@@ -487,7 +517,8 @@ class ApiHandler(BaseHTTPRequestHandler):
             job, created = srv.queue_file(
                 self.rfile, req["name"], size, exact=True, source="api",
                 settings=req["settings"], preset=req["preset"], copies=req["copies"],
-                priority=req["priority"], hold=req["hold"], key=req["key"], client=req["client"])
+                priority=req["priority"], hold=req["hold"], key=req["key"], client=req["client"],
+                printer=req["printer"])
         except Invalid as exc:
             self.close_connection = True
             return self._error(exc.status, str(exc), close=True)
@@ -500,7 +531,7 @@ class ApiHandler(BaseHTTPRequestHandler):
         self._body_left = 0
         if not created:
             return self._json(200, {"job": srv.public(job), "duplicate": True})
-        srv.worker.notify()
+        srv.notify()
         self._json(201, {"job": srv.public(job), "duplicate": False})
 
     def do_GET(self):
