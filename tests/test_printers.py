@@ -114,3 +114,42 @@ def test_serve_refuses_bad_printer_options(tmp_path):
                             str(tmp_path / "s"), "--port", "0", *args],
                            capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and words in r.stderr, (args, r.stderr)
+
+
+def test_live_state_is_pushed_as_server_sent_events(two):
+    """GET /v1/events: the printers' state and the unfinished jobs, sent when they change;
+    a client sees a job queued, printing on a printer, and gone when done, without polling."""
+    import http.client
+    import json
+    import threading
+    srv, client, tmp = two
+    events = []
+
+    def listen():
+        conn = http.client.HTTPConnection("127.0.0.1", srv.port, timeout=30)
+        conn.request("GET", "/v1/events?max_s=8", headers={"Authorization": f"Bearer {srv.token}"})
+        resp = conn.getresponse()
+        assert resp.status == 200 and resp.getheader("Content-Type") == "text/event-stream"
+        kind = None
+        for raw in resp:
+            line = raw.decode().rstrip("\n")
+            if line.startswith("event: "):
+                kind = line[7:]
+            elif line.startswith("data: "):
+                events.append((kind, json.loads(line[6:])))
+        conn.close()
+    t = threading.Thread(target=listen)
+    t.start()
+    time.sleep(0.5)
+    f, planes = _image(tmp, "live.tif", 7, rows=300)
+    job_id = client.submit(f, settings={"passes": 2}, printer="right")["job"]["id"]
+    assert client.wait(job_id, 60)["state"] == "done"
+    t.join(30)
+    kinds = [k for k, _ in events]
+    assert kinds[:2] == ["printers", "jobs"]                      # the state at once
+    printing = [p for k, v in events if k == "printers" for p in v
+                if p["name"] == "right" and p["current"] and p["current"]["id"] == job_id]
+    assert printing, "no event showed the job printing on its printer"
+    seen = [any(j["id"] == job_id for j in v) for k, v in events if k == "jobs"]
+    assert True in seen and seen[-1] is False                     # queued, then finished
+    assert len(events) < 200                                      # changes, not a stream of copies

@@ -270,6 +270,45 @@ class ApiHandler(BaseHTTPRequestHandler):
             log.debug("api %s: the client went away before its answer (%s %d; %s)",
                      self.client_address[0], self.command or "-", status, type(exc).__name__)
 
+    def _events(self, max_s: int | None) -> None:
+        """Server-sent events (text/event-stream, docs/server.md "Live state"): the state of
+        the printers (`printers`: state, fault, current job and its telemetry) and of the
+        jobs not finished (`jobs`), each sent when it changes, checked 5 times a second on
+        the server; a comment every 15 s keeps the connection alive.  One stream replaces a
+        client's polling.  `?max_s=N` ends the stream after N seconds (tests, scripts)."""
+        import time as _time
+        srv = self.srv
+        self.close_connection = True
+        try:
+            self.connection.settimeout(self.idle)
+            self.send_response(200)
+            self.send_header("Content-Type", "text/event-stream")
+            self.send_header("Cache-Control", "no-store")
+            self.send_header("Connection", "close")
+            self._answered = True
+            self.end_headers()
+            last: dict = {}
+            beat = start = _time.monotonic()
+            while not srv.stopping():
+                now = _time.monotonic()
+                if max_s is not None and now - start >= max_s:
+                    break
+                state = {"printers": srv.printers(),
+                         "jobs": srv.jobs(("queued", "held", "printing"))}
+                for kind, value in state.items():
+                    if value != last.get(kind):
+                        last[kind] = value
+                        data = json.dumps(value, separators=(",", ":"), default=str)
+                        self.wfile.write(f"event: {kind}\ndata: {data}\n\n".encode())
+                        beat = now
+                if now - beat >= 15:
+                    self.wfile.write(b": alive\n\n")
+                    beat = now
+                self.wfile.flush()
+                _time.sleep(0.2)
+        except GONE as exc:
+            log.debug("api %s: an event stream ended (%s)", self.client_address[0], type(exc).__name__)
+
     def _json(self, status: int, obj, close: bool = False, extra: dict | None = None) -> None:
         self._send(status, (json.dumps(obj, indent=1) + "\n").encode(), "application/json",
                    close, extra)
@@ -424,6 +463,10 @@ class ApiHandler(BaseHTTPRequestHandler):
                     if not w.fault:                       # a fault stays until cleared
                         w.set_paused(body["paused"], "paused by the operator")
                 return self._json(200, self.srv.status())
+            if method == "GET" and route == ["events"]:
+                q = self._query(url.query, ("max_s",))
+                max_s = _number("max_s", q["max_s"]) if "max_s" in q else None
+                return self._events(max_s)
             if method == "GET" and route == ["printers"]:
                 self._query(url.query, ())
                 return self._json(200, {"printers": self.srv.printers()})

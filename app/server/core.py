@@ -99,6 +99,9 @@ class PrintServer:
             except OSError:
                 pass
 
+    def stopping(self) -> bool:
+        return self._stopped.is_set()
+
     def keeps_copy(self, state: str) -> bool:
         """Whether a job ending in `state` keeps its spool copy: failed and cancelled jobs
         do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0."""
