@@ -125,6 +125,7 @@ class PrintJob:
         self.dev = device
         self.resume = resume
         self.checkpoint: dict = {}
+        self._started: set[int] = set()      # passes this run sent SET_LINE for
         self.speed_mm_s = speed_mm_s
         self.allow_overspeed = allow_overspeed
         self.rip = rip
@@ -294,13 +295,19 @@ class PrintJob:
                                 info.get("block_fires", prof.block_fires),
                                 info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         st = link.status()
-        if st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
+        # The pass registers may still describe another job's (or copy's) last line with
+        # the same number and length: only a line this job started (before a lost link),
+        # or the one a resumed job stopped in, may be taken as its own.
+        ours = pd.index in self._started or (
+            self.resume is not None and pd.index == self.resume.get("next_pass"))
+        if ours and st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
                 st.flags & P.FLAG_LINE_DONE and st.fires_done == pd.fires:
             link.write_reg(P.REG_WE_EN, 0)          # it finished while we were away
             return
-        if st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
+        if ours and st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
             streamer.resume()                       # the line is running or starved: feed it
         else:
+            self._started.add(pd.index)
             speed, accel = self.line_speed(), prof.accel_counts_s2()
             link.call(P.Op.SET_LINE, pass_id=pd.index, direction=pd.direction, dpi=dpi,
                       fire_start=first, fire_count=pd.fires, speed=speed, accel=accel)
