@@ -743,7 +743,7 @@ def schema_2() -> str:
 
 
 def test_schema_1_database_gets_the_attempt_columns(tmp_path):
-    from wideprint.app.server.spool import Spool
+    from wideprint.app.server.spool import SCHEMA_VERSION, Spool
     state = tmp_path / "state"
     state.mkdir()
     old = re.sub(r"\n\s*attempt[^\n]*", "", schema_2())           # schema 1: no attempt columns
@@ -757,7 +757,7 @@ def test_schema_1_database_gets_the_attempt_columns(tmp_path):
     sp = Spool(state)
     assert sp.get(1)["attempt"] == 1
     assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
-    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
     sp.close()
 
 
@@ -766,7 +766,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     checkpoints naming the next stroke `next_pass`) opens with every job and print kept,
     its columns renamed to strokes; an interrupted job still resumes where it stopped."""
     from wideprint.app.server.accounting import prints_csv
-    from wideprint.app.server.spool import Spool
+    from wideprint.app.server.spool import SCHEMA_VERSION, Spool
     state = tmp_path / "state"
     state.mkdir()
     db = sqlite3.connect(state / "wideprint.db")
@@ -786,7 +786,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     db.close()
     sp = Spool(state)
     try:
-        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
+        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
         for table in ("jobs", "prints"):
             cols = {r[1] for r in sp.db.execute(f"PRAGMA table_info({table})")}
             assert not {c for c in cols if c.startswith("passes")}, cols
