@@ -138,7 +138,8 @@ class RipJob(PrintableJob):
     @property
     def ink_limit(self) -> float | None:
         """--ink-limit if given; else the profile's limit for separations we make (RGB,
-        grey); CMYK files print as they are."""
+        grey, and documents, whose RGB Ghostscript separates with the RIP's profiles);
+        CMYK files print as they are."""
         if self.settings.ink_limit is not None:
             return self.settings.ink_limit
         if self.source.colorspace == "cmyk" and not getattr(self.source, "separated", False):

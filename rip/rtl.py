@@ -232,18 +232,11 @@ class _Stream:
                 return skipped
 
     def take(self, n: int) -> bytes:
-        """n bytes (fewer at the end of the file)."""
-        if n <= CHUNK:
-            self.fill(n)
-            out = self.buf[self.pos: self.pos + n]
-            self.pos += len(out)
-            return out
-        have = self.buf[self.pos:]
-        self.base += len(self.buf)
-        self.buf, self.pos = b"", 0
-        rest = self.f.read(n - len(have))
-        self.base += len(rest)
-        return have + rest
+        """n bytes (fewer at the end of the file); n is at most MAX_DATA."""
+        self.fill(n)
+        out = self.buf[self.pos: self.pos + n]
+        self.pos += len(out)
+        return out
 
 
 class _Parser:

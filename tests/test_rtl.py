@@ -82,6 +82,25 @@ def test_hpgl2_pjl_and_stray_commands_are_skipped(tmp_path):
     assert any("ESC*p200Y is ignored" in w for w in src.warnings)
 
 
+def test_commands_and_data_across_read_chunks(tmp_path, monkeypatch):
+    """The reader works on the file in chunks: escape sequences, HP-GL/2 ends and data that
+    straddle chunk boundaries decode the same (here 5-byte chunks)."""
+    from wideprint.rip import rtl
+    dots = dots_pattern(40, 77, seed=8)
+    p = tmp_path / "c.rtl"
+    for config, mode in (("simple-kcmy", 3), ("simple-k", 5), ("cid-rgb-direct", 1)):
+        p.write_bytes(encode_bits(dots, config, mode, combine=mode != 5, blocks=2))
+        want = decode(p)
+        monkeypatch.setattr(rtl, "CHUNK", 5)
+        assert np.array_equal(decode(p), want)
+        assert np.array_equal(want, expected_dots(dots, config))
+        monkeypatch.setattr(rtl, "CHUNK", 1 << 20)
+    big = np.random.default_rng(0).integers(0, 256, (3, 40000, 3), dtype=np.uint8)   # 120 kB rows
+    p.write_bytes(encode_contone(big, "rgb", 0))
+    monkeypatch.setattr(rtl, "CHUNK", 1 << 12)
+    assert np.array_equal(decode(p, rows=2), big)
+
+
 # -- printing -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("config, mode", [
     ("simple-kcmy", 0), ("cid-kcmy", 1), ("simple-cmy", 2), ("cid-rgb-direct", 3), ("simple-k", 5),
