@@ -10,10 +10,12 @@ SAMPLE := resources/samples/sample.tif
 
 .PHONY: demo test install bench clean
 
-$(STAMP): setup.cfg pyproject.toml
+$(STAMP): setup.cfg pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test,gui]'
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test,gui]'
+	# compile the numba kernels now, so the first print after set-up is as quick as any
+	$(BIN)/python -m wideprint.app.warmup
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -24,10 +24,10 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
 def _emulator_outputs(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vcd", metavar="FILE.vcd", help="emulator: waveform of the head interface "
                    "and encoder for --vcd-window (GTKWave)")
-    p.add_argument("--vcd-window", default="0:0:0:8", metavar="PASS:HEAD:FIRST:COUNT",
+    p.add_argument("--vcd-window", default="0:0:0:8", metavar="STROKE:HEAD:FIRST:COUNT",
                    help="which fires go into the VCD (head index 0-7; default 0:0:0:8)")
     p.add_argument("--latched-out", metavar="FILE.npz",
-                   help="emulator: the 128-bit words every head latched, per pass")
+                   help="emulator: the 128-bit words every head latched, per stroke")
 
 
 def _emulator_options(args) -> dict:
@@ -37,7 +37,7 @@ def _emulator_options(args) -> dict:
             window = tuple(int(v) for v in args.vcd_window.split(":"))
             assert len(window) == 4
         except (ValueError, AssertionError):
-            raise ValueError(f"--vcd-window {args.vcd_window!r}: expected PASS:HEAD:FIRST:COUNT") from None
+            raise ValueError(f"--vcd-window {args.vcd_window!r}: expected STROKE:HEAD:FIRST:COUNT") from None
         opts.update(vcd_path=args.vcd, vcd_window=window)
     if getattr(args, "latched_out", None):
         opts["record_latched"] = True
@@ -45,7 +45,7 @@ def _emulator_options(args) -> dict:
 
 
 def _save_latched(printer, path: str) -> None:
-    np_arrays = {f"pass{p}": printer.latched_words(p) for p in sorted(printer.latched)}
+    np_arrays = {f"stroke{i}": printer.latched_words(i) for i in sorted(printer.latched)}
     import numpy as np
     np.savez_compressed(path, **np_arrays)
 
@@ -172,8 +172,9 @@ def cmd_print(args) -> int:
             label = f"{i + 1}/{len(files)} {Path(f).name}"
 
             def on_event(kind, label=label, job_id=i + 1, file=f, **kw):
-                if kind == "pass":                      # a progress bar on a terminal
-                    progress(kw["index"], kw["total"], f"{label} pass {kw['index'] + 1}")
+                if kind == "stroke":                    # a progress bar on a terminal
+                    progress(kw["index"], kw["total"],
+                             f"{label} stroke {kw['index'] + 1} of {kw['total']}")
                 if log_json is not None:                # structured log: one JSON object a line
                     import dataclasses
                     data = {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v)
@@ -194,7 +195,7 @@ def cmd_print(args) -> int:
                 if dev.emulator is not None:
                     stats = dev.emulator.jobs_done.get(i + 1, {})
                     rep["stray_drops"] = stats.get("stray")
-                print(f"{f}: printed {rep['passes_printed']} passes, "
+                print(f"{f}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
@@ -254,7 +255,7 @@ def cmd_test_print(args) -> int:
         if args.preview and args.media_out:
             from ..rip.planes import write_preview
             write_preview(args.media_out, args.preview)
-        print(f"{args.pattern}: printed {rep.passes_printed} passes, {job.width} x {job.height} dots"
+        print(f"{args.pattern}: printed {rep.strokes_printed} strokes, {job.width} x {job.height} dots"
               + (f" -> {args.media_out}" if args.media_out else ""))
         return EXIT_OK
     except JobError as exc:
@@ -350,7 +351,33 @@ def cmd_devices(args) -> int:
     return EXIT_OK
 
 
+def cmd_acceptance(args) -> int:
+    """pytest on the sample suite (resources/acceptance/); the plugin comes with the
+    package (entry point pytest11)."""
+    try:
+        import pytest
+    except ImportError:
+        print("wideprint acceptance: needs pytest (pip install 'wideprint[test]')", file=sys.stderr)
+        return EXIT_USAGE
+    suite = args.suite or str(Path(__file__).resolve().parent.parent / "resources" / "acceptance")
+    argv = [suite, "-q", "-p", "no:cacheprovider", f"--wideprint-device={args.device}"]
+    if args.junit_xml:
+        argv.append(f"--junit-xml={args.junit_xml}")
+    return int(pytest.main(argv + list(args.pytest_args)))
+
+
+def cmd_completion(args) -> int:
+    """The completion script, generated from this very parser by shtab."""
+    import shtab
+    try:
+        print(shtab.complete(build_parser(), shell=args.shell))
+    except BrokenPipeError:        # `| head`: the reader has what it wanted
+        pass
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from . import devices
     from .. import __version__
     ap = argparse.ArgumentParser(prog="wideprint", description="RIP and driver for the "
                                  "3.4 m CMYK solvent printer (8 x Xaar XJ128), with its emulator.")
@@ -362,7 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("files", nargs="+", metavar="FILE", help="images (TIFF/JPEG/PNG/BMP), PDF, PostScript, "
                    "EPS, HP RTL, or folders")
     p.add_argument("--device", default="emulator",
-                   help="'emulator' (in-process) or serial=PORT,data=tcp://HOST:PORT")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--media-out", metavar="MEDIA.tif",
                    help="emulator only: write the printed media (with several files: -N suffix or {job})")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
@@ -371,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
     p.add_argument("--log-json", metavar="JSONL",
-                   help="structured job log: states, passes, status, recoveries (JSON lines)")
+                   help="structured job log: states, strokes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
     _rip_options(p)
     p.set_defaults(func=cmd_print)
@@ -391,6 +418,23 @@ def build_parser() -> argparse.ArgumentParser:
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report
+
+    p = sub.add_parser("completion", help="print a shell completion script (bash, zsh, tcsh)",
+                       description="Shell completion for wideprint, e.g. "
+                       "`wideprint completion bash > /etc/bash_completion.d/wideprint` or "
+                       "`source <(wideprint completion bash)`.")
+    p.add_argument("shell", choices=("bash", "zsh", "tcsh"))
+    p.set_defaults(func=cmd_completion)
+
+    p = sub.add_parser("acceptance", help="run the sample acceptance suite (docs/acceptance.md)",
+                       description="Runs wideprint's sample acceptance suite (the thesis' test "
+                       "prints, a colour chart, a fault drill) with pytest and the wideprint "
+                       "plugin; extra arguments after -- go to pytest.")
+    p.add_argument("--device", default="emulator", help=devices.DEVICE_HELP)
+    p.add_argument("--junit-xml", metavar="FILE", help="write a JUnit XML report (for CI systems)")
+    p.add_argument("--suite", metavar="DIR", help="another suite folder (default: the sample suite)")
+    p.add_argument("pytest_args", nargs="*", metavar="PYTEST-ARG")
+    p.set_defaults(func=cmd_acceptance)
 
     from .printer_cli import add_parser as add_printer_parser
     add_printer_parser(sub)       # printer status|home|park|feed|measure|clear-fault

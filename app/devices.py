@@ -16,22 +16,25 @@ GUI and the print server alike.
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from ..driver.device import Device, Timing, open_link_device, parse_link_spec
-from ..driver.link import CommandLink, LinkError
-from ..driver.transport import TcpData, UsbData
-from ..rip.profile import Profile
+if TYPE_CHECKING:          # imported when a device is opened: `--help` stays light
+    from ..driver.device import Device
+    from ..rip.profile import Profile
 
 EMULATOR_SPECS = ("emulator", "emulator-usb")
+DEVICE_HELP = ("the printer: emulator (in-process), emulator-usb (in-process, data through "
+               "pyusb), or serial=PORT,data=URL[,baud=N] with PORT a tty, pty or "
+               "socket://HOST:PORT and URL usb://VID:PID[/SERIAL], /dev/NODE (the PCI card), "
+               "tcp://HOST:PORT or usb-emu://HOST:PORT (docs/driver.md)")
 
 
 def is_emulator_spec(spec: str) -> bool:
     return spec.strip() in EMULATOR_SPECS
 
 
-def open_device(spec: str, profile: Profile, faults=None, media_path=None, event_log=None,
-                machine_profile: Profile | None = None, *,
+def open_device(spec: str, profile: "Profile", faults=None, media_path=None, event_log=None,
+                machine_profile: "Profile | None" = None, *,
                 printer_class=None, wrap: Callable | None = None,
                 **emulator_options) -> Device:
     """Open the device a spec names.
@@ -42,6 +45,9 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None, event
     record_latched); `printer_class` replaces device_sim's Printer (the GUI's live view)
     and `wrap(port, data, printer) -> (port, data)` wraps its endpoints (the GUI paces
     them to the machine's real speed).  The emulator is attached as `device.emulator`."""
+    from ..driver.device import Device, Timing, open_link_device, parse_link_spec
+    from ..driver.link import CommandLink, LinkError
+    from ..driver.transport import TcpData, UsbData
     spec = spec.strip()
     if spec in EMULATOR_SPECS:
         from ..device_sim.endpoints import in_process
@@ -70,7 +76,7 @@ def open_device(spec: str, profile: Profile, faults=None, media_path=None, event
     return open_link_device(spec, profile, data=data)
 
 
-def close_device(dev: Device) -> None:
+def close_device(dev: "Device") -> None:
     """Close a device; an in-process emulator first finishes its outputs (media, logs)."""
     try:
         if dev.emulator is not None:

@@ -18,6 +18,7 @@ ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault")
 
 
 def add_parser(sub) -> None:
+    from . import devices
     p = sub.add_parser("printer", help="printer status and machine commands (home, park, "
                        "feed, measure the paper, clear a fault)",
                        description="Status and machine commands of one printer, through the "
@@ -25,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("action", choices=ACTIONS)
     p.add_argument("mm", nargs="?", type=float, help="feed: millimetres of paper (negative: back)")
     p.add_argument("--device", default="emulator",
-                   help="'emulator', 'emulator-usb' or serial=PORT,data=URL (docs/driver.md)")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE",
                    help="emulator fault (docs/emulator.md)")
@@ -77,6 +78,25 @@ def _print_status(d: dict) -> None:
     print(f"fault: {d['fault'] or 'none'}")
 
 
+def _again(printer, step, tries: int = 3):
+    """Run a machine command; when the link fails (3 tries of a frame, e.g. a slow or noisy
+    line) reconnect and run it again.  Every command here is safe to repeat: home, park,
+    measure and enable are idempotent, a feed goes to an absolute position."""
+    from ..driver.link import LineTooNoisy, LinkError
+    for attempt in range(tries):
+        try:
+            return step()
+        except LineTooNoisy:
+            raise
+        except LinkError:
+            if attempt == tries - 1:
+                raise
+            try:
+                printer.connect()
+            except LinkError:
+                pass                        # the next try says it again, or the last one raises
+
+
 def cmd_printer(args) -> int:
     from ..driver import protocol as P
     from ..driver.link import DeviceError, LinkError
@@ -104,7 +124,7 @@ def cmd_printer(args) -> int:
         return EXIT_DEVICE
     printer = Printer(dev)
     try:
-        printer.connect()
+        _again(printer, printer.connect)
         if args.action == "status":
             d = status_dict(printer)
             print(json.dumps(d, indent=2)) if args.json else _print_status(d)
@@ -121,19 +141,21 @@ def cmd_printer(args) -> int:
                   file=sys.stderr)
             return EXIT_FAILED
         if not st.flags & P.FLAG_ENABLED:
-            printer.enable()
+            _again(printer, printer.enable)
         if args.action == "home" or not st.flags & P.FLAG_HOMED:
             print("homing")
-            printer.home()
+            _again(printer, printer.home)
         if args.action == "park":
-            printer.park()
+            _again(printer, printer.park)
             print(f"parked at {printer.status().carriage / profile.counts_per_inch * 25.4:.1f} mm")
         elif args.action == "measure":
-            paper = printer.measure_paper()
+            paper = _again(printer, printer.measure_paper)
             print(f"paper: {paper.width_mm:.1f} mm wide from {paper.left_mm:.1f} mm" if paper.present
                   else "paper: none loaded")
         elif args.action == "feed":
-            steps = printer.feed(args.mm)
+            steps = int(round(args.mm * 1000 / profile.feed_um_per_step))
+            target = printer.status().paper_steps + steps       # absolute: safe to repeat
+            _again(printer, lambda: printer.feed_to(target))
             print(f"fed {steps * profile.feed_um_per_step / 1000:.3f} mm ({steps} steps)")
         return EXIT_OK
     except LinkError as exc:

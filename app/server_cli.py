@@ -9,13 +9,16 @@ commands on their own.
 from __future__ import annotations
 
 import argparse
-import http.client
 import json
 import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
+
+if TYPE_CHECKING:
+    import http.client
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SERVER = 0, 1, 2, 3
 
@@ -52,6 +55,7 @@ class Client:
         self._conn: http.client.HTTPConnection | None = None
 
     def _connection(self) -> http.client.HTTPConnection:
+        import http.client                  # here: the CLI's --help does not need it
         if self._conn is None:
             self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
         return self._conn
@@ -68,6 +72,7 @@ class Client:
         if isinstance(body, (dict, list)):
             body = json.dumps(body).encode()
             hdrs["Content-Type"] = "application/json"
+        import http.client
         for attempt in (0, 1):
             conn = self._connection()
             try:
@@ -204,6 +209,10 @@ def cmd_serve(args) -> int:
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.WARNING,
                             format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if not (args.settle_time >= 0 and args.api_timeout > 0 and args.api_connections > 0):
+        print("wideprint serve: --settle-time must be 0 or more, --api-timeout and "
+              "--api-connections positive", file=sys.stderr)
+        return EXIT_USAGE
     if args.max_file_size is not None and args.max_file_size <= 0:
         print("wideprint serve: --max-file-size must be positive", file=sys.stderr)
         return EXIT_USAGE
@@ -212,7 +221,8 @@ def cmd_serve(args) -> int:
                        hot_folder_root=Path(args.hot_folder_root) if args.hot_folder_root else None,
                        host=args.host, port=args.port, on_crash=args.on_crash,
                        scan_interval=args.scan_interval, start_paused=args.paused,
-                       profile_path=args.profile)
+                       profile_path=args.profile, settle_s=args.settle_time,
+                       api_timeout_s=args.api_timeout, api_max_connections=args.api_connections)
     if args.max_file_size is not None:
         cfg.max_file_bytes = args.max_file_size
     if args.keep_failed is not None:
@@ -305,12 +315,12 @@ def cmd_queue(args) -> int:
     if not jobs:
         print("the queue is empty" + ("" if args.all else " (--all shows finished jobs)"))
         return EXIT_OK
-    print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'PASSES':>9} {'COPIES':>6} "
+    print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'STROKES':>9} {'COPIES':>6} "
           f"{'PRESET':10} {'SOURCE':12} {'SUBMITTED':9} NAME / MESSAGE")
     for j in jobs:
-        passes = f"{j['passes_done']}/{j['passes_total']}" if j["passes_total"] else ""
+        strokes = f"{j['strokes_done']}/{j['strokes_total']}" if j["strokes_total"] else ""
         print(f"{j['id']:>6} {j['state']:9} {j.get('position') or '':>4} {j['priority']:>4} "
-              f"{passes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
+              f"{strokes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
               f"{j['source']:12.12} {_age(j['submitted']):9} {j['name']}"
               + (f" (attempt {j['attempt']})" if j.get("attempt", 1) > 1 else "")
               + (f"  [{j['message']}]" if j["message"] else ""))
@@ -361,8 +371,8 @@ def cmd_status(args) -> int:
               + (f"; NOT RE-READ: {pr['error']}" if pr["error"] else ""))
     if cur:
         print(f"current  job {cur['id']} {cur['name']}: {cur['state']}"
-              f"{' ' + cur['detail'] if cur['detail'] else ''}, pass "
-              f"{cur['passes_printed']}/{cur['passes_total']}, copy {cur['copy']}/{cur['copies']}"
+              f"{' ' + cur['detail'] if cur['detail'] else ''}, stroke "
+              f"{cur['strokes_printed']}/{cur['strokes_total']}, copy {cur['copy']}/{cur['copies']}"
               + (" (resumed)" if cur.get("resumed") else ""))
     return EXIT_OK
 
@@ -409,11 +419,11 @@ def cmd_report(args) -> int:
     import csv
     import io
     rows = list(csv.DictReader(io.StringIO(text)))
-    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'PASSES':>7} {'M2':>9} {'INK ML':>10} "
+    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'STROKES':>7} {'M2':>9} {'INK ML':>10} "
           f"{'SECONDS':>8}  FILE")
     for r in rows:
         print(f"{r['job_id']:>5} {r['copy']:>4} {r['outcome']:9} "
-              f"{r['passes_printed'] + '/' + r['passes_total']:>7} {float(r['area_m2']):9.4f} "
+              f"{r['strokes_printed'] + '/' + r['strokes_total']:>7} {float(r['area_m2']):9.4f} "
               f"{float(r['ink_total_ml']):10.5f} {float(r['duration_s']):8.1f}  {r['file']}")
     return EXIT_OK
 
@@ -435,12 +445,14 @@ def _client_parser(sub, name: str, help: str) -> argparse.ArgumentParser:
 def add_parser(sub) -> None:
     """Add serve, submit, queue, cancel, hold, release, requeue, status, presets and report
     to the `wideprint` command's subparsers."""
-    from .server.config import DEFAULT_PORT
+    from . import devices
+    from .server.config import (DEFAULT_API_CONNECTIONS, DEFAULT_API_TIMEOUT_S, DEFAULT_PORT,
+                                DEFAULT_SETTLE_S)
     from ..rip.settings import add_arguments as add_settings_arguments
 
     p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
     p.add_argument("--device", default="emulator",
-                   help="'emulator' (in-process) or serial=PORT,data=URL (docs/driver.md)")
+                   help=devices.DEVICE_HELP + " (default: emulator)")
     _state_dir_option(p)
     p.add_argument("--media-dir", metavar="DIR",
                    help="in-process emulator: write each job's media as DIR/job-ID.tif")
@@ -452,11 +464,20 @@ def add_parser(sub) -> None:
                    help=f"API port (default {DEFAULT_PORT}; 0 = any free port)")
     p.add_argument("--on-crash", choices=("resume", "hold"), default="resume",
                    help="a job that was printing when the server died: resume it at its "
-                        "first unfinished pass (default), or hold it for the operator")
+                        "first unfinished stroke (default), or hold it for the operator")
     p.add_argument("--max-file-size", type=int, metavar="BYTES",
                    help="largest file accepted (default 4 GiB)")
     p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",
                    help="hot-folder scan interval (default 1 s)")
+    p.add_argument("--settle-time", type=float, default=DEFAULT_SETTLE_S, metavar="S",
+                   help="a hot-folder file unchanged this long, and open for writing by "
+                        f"nobody, is complete (default {DEFAULT_SETTLE_S:g} s)")
+    p.add_argument("--api-timeout", type=float, default=DEFAULT_API_TIMEOUT_S, metavar="S",
+                   help="close API connections silent this long (default "
+                        f"{DEFAULT_API_TIMEOUT_S:g} s)")
+    p.add_argument("--api-connections", type=int, default=DEFAULT_API_CONNECTIONS, metavar="N",
+                   help=f"API connections served at once; more get 503 (default "
+                        f"{DEFAULT_API_CONNECTIONS})")
     p.add_argument("--keep-failed", type=float, metavar="DAYS",
                    help="keep the spooled files of failed and cancelled jobs this long, so "
                         "they can be requeued (default 7; 0 = delete them at once)")

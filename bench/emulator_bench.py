@@ -21,14 +21,14 @@ from wideprint.rip.testprints import PatternJob
 
 @dataclass
 class Ripped(PatternJob):
-    """A job whose passes were computed before the clock starts."""
+    """A job whose strokes were computed before the clock starts."""
 
     def __post_init__(self):
         super().__post_init__()
-        self._passes = list(super().passes())
+        self._strokes = list(super().strokes())
 
-    def passes(self, planner=None):
-        return iter(self._passes)
+    def strokes(self, planner=None):
+        return iter(self._strokes)
 
 
 def main() -> None:
@@ -56,7 +56,7 @@ def main() -> None:
     emu.close()
     mpx = width * args.rows / 1e6
     print(f"job: {width} x {args.rows} dots ({args.width_mm:.0f} mm wide, {dpi} dpi, "
-          f"{args.passes}-pass bidirectional), {rep.passes_printed} passes, {mpx:.0f} Mpx")
+          f"{args.passes}-pass bidirectional), {rep.strokes_printed} strokes, {mpx:.0f} Mpx")
     print(f"rip (not timed): {rip_s:.1f} s")
     print(f"printing: simulated {sim:.1f} s, wall {wall:.1f} s -> {sim / wall:.1f}x real time "
           f"(target >= 20x)")

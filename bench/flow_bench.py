@@ -2,10 +2,10 @@
 emulator's host-jitter model (docs/emulator.md), with the seed's 256-word FIFOs, and the
 same job at 660 mm/s with an on-card pass buffer (issue 5).
 
-Each run prints full-width 300 dpi passes; a "starve" is a trigger that found a FIFO empty
-(with the starve guard on the line pauses and resumes, so we can count them all; with the
-guard off each one would be an underrun fault).
-Run: .venv/bin/python bench/flow_bench.py [--passes 3] [--jitter typical]"""
+Each run prints full-width 300 dpi strokes (a 1-pass job); a "starve" is a trigger that
+found a FIFO empty (with the starve guard on the line pauses and resumes, so we can count
+them all; with the guard off each one would be an underrun fault).
+Run: .venv/bin/python bench/flow_bench.py [--strokes 3] [--jitter typical]"""
 
 from __future__ import annotations
 
@@ -47,24 +47,24 @@ def run(profile, job_planes, speed, jitter, seed):
     lines = [e for e in emu.events if e["event"] == "line"]
     starves = sum(e["pauses"] for e in lines)
     levels = [e["min_fifo_words"] for e in lines if e["min_fifo_words"] is not None]
-    min_fifo = min(levels) if levels else None      # None: the whole pass was preloaded
+    min_fifo = min(levels) if levels else None      # None: the whole stroke was preloaded
     emu.close()
     return starves, min_fifo, wall
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--passes", type=int, default=3)
+    ap.add_argument("--strokes", type=int, default=3)
     ap.add_argument("--jitter", default="typical", choices=("ideal", "typical", "loaded"))
     ap.add_argument("--seeds", type=int, default=2)
     args = ap.parse_args()
     base = load_profile()
     width = int(3180 / 25.4 * 300)
-    rows = 252 * args.passes
+    rows = 252 * args.strokes
     rng = np.random.default_rng(0)
     planes = (rng.random((rows, width, 4)) < 0.25).astype(np.uint8)
     speeds = [100, 200, 300, 400, 500, 600, 660]
-    print(f"job: {args.passes} full-width passes of {width} columns at 300 dpi; host jitter "
+    print(f"job: {args.strokes} full-width strokes of {width} columns at 300 dpi; host jitter "
           f"'{args.jitter}', {args.seeds} seeds per point")
     print(f"FIFO {base.fifo_words} words/head, DMA ring {base.ring_blocks} blocks of "
           f"{base.block_fires} fires")

@@ -1,5 +1,5 @@
 """A long PDF banner against the same banner as a TIFF: peak memory and time of the RIP
-(file -> every pass's swath words), docs/documents.md.
+(file -> every stroke's swath words), docs/documents.md.
 
 The banner is vector PostScript (colour bars, a grey ramp, circles, large text every metre)
 of --width-m x --length-m; ps2pdf makes the PDF.  Ghostscript also renders it once, before
@@ -65,7 +65,7 @@ def child(path: str, dither: str, dpi: int, pixels: bool) -> None:
     t_open = time.perf_counter() - t0
     crc, passes, dots = 0, 0, 0
     t1 = time.perf_counter()
-    for p in job.passes():
+    for p in job.strokes():
         crc = zlib.crc32(p.words.tobytes(), crc)
         crc = zlib.crc32(bytes(f"{p.index}:{p.direction}:{p.top_row}:{p.first_column}", "ascii"), crc)
         passes += 1

@@ -7,7 +7,7 @@ side by side in one run, on the same generated RGB image (issue targets printed 
 
 What is measured (1 image pixel = 1 device pixel, 1-bit CMYK out, each run in a fresh process
 whose peak RSS is read from os.wait4's rusage):
-- wideprint: file -> swath words (RipJob(...).passes(), every PassData.words made), 300 dpi,
+- wideprint: file -> swath words (RipJob(...).strokes(), every StrokeData.words made), 300 dpi,
   1 pass, dither fs (error diffusion; the RGB input goes through the ICC separation), bayer
   and bluenoise (ordered).  The numba cache is warmed first by a tiny job in a separate
   process, and each timed process runs a tiny job of its own before the clock starts, so the
@@ -272,15 +272,15 @@ def _job(path: str, method: str):
 
 
 def _consume(job) -> dict:
-    n_pass = 0
+    n_strokes = 0
     words = 0
     dots = np.zeros(4, np.int64)
-    for p in job.passes():
-        n_pass += 1
-        words += p.words.size
-        dots += p.dots
+    for s in job.strokes():
+        n_strokes += 1
+        words += s.words.size
+        dots += s.dots
     job.close()
-    return dict(passes=n_pass, words=words, dots=int(dots.sum()), width=job.width, height=job.height)
+    return dict(strokes=n_strokes, words=words, dots=int(dots.sum()), width=job.width, height=job.height)
 
 
 def _rip(path: str, method: str) -> dict:
@@ -642,8 +642,8 @@ def profile(method: str, w: int, h: int) -> None:
         patches = [(color.Separator, "convert", timed("separation", color.Separator.convert)),
                    (halftone.Halftoner, "process", timed("halftone", halftone.Halftoner.process)),
                    (screen.OrderedScreen, "process", timed("screen", screen.OrderedScreen.process)),
-                   (swath.PassPlanner, "feed_packed", timed("swath", swath.PassPlanner.feed_packed)),
-                   (swath.PassPlanner, "finish", timed("swath", swath.PassPlanner.finish))]
+                   (swath.StrokePlanner, "feed_packed", timed("swath", swath.StrokePlanner.feed_packed)),
+                   (swath.StrokePlanner, "finish", timed("swath", swath.StrokePlanner.finish))]
         saved = [(cls, name, cls.__dict__[name]) for cls, name, _ in patches]
         for cls, name, fn in patches:
             setattr(cls, name, fn)

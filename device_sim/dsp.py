@@ -256,10 +256,10 @@ class Dsp:
         return self.printer.feed(steps, profile, max_rate, accel)
 
     @handles(P.Op.SET_LINE, NEEDS_HOME)
-    def set_line(self, pass_id, direction, dpi, fire_start, fire_count, speed, accel):
-        return self.printer.set_line(pass_id, direction, dpi, fire_start, fire_count, speed, accel)
+    def set_line(self, stroke, direction, dpi, fire_start, fire_count, speed, accel):
+        return self.printer.set_line(stroke, direction, dpi, fire_start, fire_count, speed, accel)
 
     @handles(P.Op.START_LINE, NEEDS_HOME)
     def start_line(self):
         code = self.printer.start_line()
-        return dict(pass_id=self.printer.fpga.pass_id) if code == P.Result.OK else code
+        return dict(stroke=self.printer.fpga.stroke) if code == P.Result.OK else code

@@ -17,11 +17,11 @@ KINDS = {
     "limit-at": "the right limit switch trips at this encoder count",
     "paper-length-mm": "length of paper left on the roll",
     "paper-width-mm": "width of the loaded sheet",
-    "overtemp": "HEAD:PASS: the head overheats during this pass, e.g. K2:3",
+    "overtemp": "HEAD:STROKE: the head overheats during this stroke, e.g. K2:3",
     "fifo-words": "FIFO depth per head (words) instead of the profile's",
     "encoder-glitch-at": "an impossible A/B transition at this encoder count",
     "starve-guard": "0: a starved FIFO is the seed's underrun fault; 1: pause and resume the line",
-    "bidir-error": "reverse-pass drops land this many columns off (misaligned machine)",
+    "bidir-error": "reverse-stroke drops land this many columns off (misaligned machine)",
     "head-error": "HEAD:COUNTS: this head sits COUNTS encoder counts off its profile position",
     "seed": "random seed for the injected faults",
 }
@@ -39,7 +39,7 @@ class Faults:
     limit_at: int | None = None
     paper_length_mm: float | None = None
     paper_width_mm: float | None = None
-    overtemp: list = field(default_factory=list)         # [(head name, pass)]
+    overtemp: list = field(default_factory=list)         # [(head name, stroke)]
     fifo_words: int | None = None
     encoder_glitch_at: int | None = None
     starve_guard: int | None = None

@@ -29,7 +29,7 @@ class Fpga:
         self.almost_empty_words = almost_empty_words
         self.block_words = block_words
         self.regs = {P.REG_DIR: 1, P.REG_DPI: P.DPI_CODE[150], P.REG_WE_EN: 0,
-                     P.REG_PASS_LO: 0, P.REG_PASS_HI: 0, P.REG_FIRE_START_LO: 0,
+                     P.REG_STROKE_LO: 0, P.REG_STROKE_HI: 0, P.REG_FIRE_START_LO: 0,
                      P.REG_FIRE_START_HI: 0, P.REG_FIRE_COUNT_LO: 0, P.REG_FIRE_COUNT_HI: 0,
                      P.REG_HEAD_MASK: (1 << n_heads) - 1}
         self.configured_mask = 0
@@ -47,8 +47,14 @@ class Fpga:
         return v
 
     @property
-    def pass_id(self) -> int:
-        return self._pair(P.REG_PASS_LO)
+    def stroke(self) -> int:
+        return self._pair(P.REG_STROKE_LO)
+
+    def clear_stroke(self) -> None:
+        """A new job: no stroke yet (the stroke registers read NO_STROKE, nothing fired)."""
+        self.regs[P.REG_STROKE_LO] = P.NO_STROKE & 0xFFFF
+        self.regs[P.REG_STROKE_HI] = P.NO_STROKE >> 16
+        self.fired = 0
 
     @property
     def fire_start(self) -> int:
@@ -124,7 +130,7 @@ class Fpga:
     def flush(self) -> None:
         self.ring: deque[RingBlock] = deque()
         self.fifo: deque[P.Block] = deque()      # blocks moved into the FIFOs, not all fired
-        self.queued_fires = 0                    # fires accepted for the pass (ring + FIFO + fired)
+        self.queued_fires = 0                    # fires accepted for the stroke (ring + FIFO + fired)
         self.loaded_fires = 0                    # fires moved into the FIFOs
         self.fired = 0                           # fires made in the current line
         self.blocks_moved = 0
@@ -170,10 +176,10 @@ class Fpga:
     def accept(self, block: P.Block, ready_s: float) -> P.Fault:
         """A block from the data channel enters the DMA ring (or is refused with a fault)."""
         if block.kind == P.BLOCK_FLUSH:
-            if block.pass_id == self.pass_id:
+            if block.stroke == self.stroke:
                 self.flush_unfired()
             return P.Fault.NONE
-        if block.pass_id != self.pass_id or block.first_fire != self.queued_fires:
+        if block.stroke != self.stroke or block.first_fire != self.queued_fires:
             return P.Fault.DATA_SEQUENCE
         if block.head_mask != self.regs[P.REG_HEAD_MASK]:
             return P.Fault.DATA_SEQUENCE

@@ -7,9 +7,9 @@ the FIFOs when its host buffer was ready and the FIFOs had room.  A block that i
 its first fire is a starvation (docs/protocol.md 2.7):
 - with the starve guard (profile `fpga.starve_guard`, default on) the FPGA stops firing
   at that column, the DSP brakes, and when the FIFOs are full again (or hold the rest of
-  the line) it backs up and re-runs the line from that column: the pass completes with
+  the line) it backs up and re-runs the line from that column: the stroke completes with
   every dot in place, only later;
-- without it, it is the seed's FIFO underrun: a fault with head, pass and column.
+- without it, it is the seed's FIFO underrun: a fault with head, stroke and column.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ class LineRun:
     def __init__(self, printer, move: ServoMove, t_start: float, speed: float, accel: float):
         fpga = printer.fpga
         self.printer = printer
-        self.pass_id = fpga.pass_id
+        self.stroke = fpga.stroke
         self.forward = fpga.forward
         self.k = printer.profile.counts_per_inch // fpga.dpi
         self.first = fpga.fire_start
@@ -71,8 +71,11 @@ class LineRun:
                                  else (pos <= inj.encoder_glitch_at))
             if hit.size:
                 self._stop_at(int(hit[0]), P.Fault.ENCODER)
-        for name, pass_id in inj.overtemp:
-            if pass_id == self.pass_id:
+        for name, stroke in list(inj.overtemp):
+            if stroke == self.stroke:
+                # the head overheats once, half-way through this line; cleared, it has
+                # cooled (Printer.clear_fault), so the stroke resumed after it runs through
+                inj.overtemp.remove((name, stroke))
                 self._stop_at(self.n // 2, P.Fault.HEAD_OVERTEMP, pr.head_index(name))
         if self.n > 1:
             period = np.diff(self.t_fire)
@@ -140,7 +143,7 @@ class LineRun:
         self.pauses += 1
         self.printer.fpga.fired = index
         pr.carriage_park_at(stop, t + v / self.accel)
-        pr.log("starved", pass_id=self.pass_id, fire=int(index), column=int(self.columns[index]),
+        pr.log("starved", stroke=self.stroke, fire=int(index), column=int(self.columns[index]),
                cause=fault.name)
         return True
 
@@ -167,7 +170,7 @@ class LineRun:
         move = ServoMove(pr.servo, start, self.end, self.speed, self.accel)
         self._segment(i, move, pr.time)
         self.paused_at = None
-        pr.log("resumed", pass_id=self.pass_id, fire=int(i), column=int(self.columns[i]))
+        pr.log("resumed", stroke=self.stroke, fire=int(i), column=int(self.columns[i]))
         self._drain_fifo()
         return True
 
@@ -221,7 +224,7 @@ class LineRun:
             for part, h in enumerate(heads):
                 pr.land_drops(h, cols, words[part], self.forward)
             if pr.record_latched and len(heads) == pr.n_heads:
-                pr.latched.setdefault(self.pass_id, []).append((int(idx[0]), words))
+                pr.latched.setdefault(self.stroke, []).append((int(idx[0]), words))
             if pr.vcd is not None:
                 self._waveform(idx, words, heads)
 
@@ -229,8 +232,8 @@ class LineRun:
         """Head-interface and encoder signals for the fires of the VCD window."""
         from .vcd import add_encoder, add_fire
         pr = self.printer
-        pass_id, head, first, count = pr.vcd_window
-        if pass_id != self.pass_id or head not in heads:
+        stroke, head, first, count = pr.vcd_window
+        if stroke != self.stroke or head not in heads:
             return
         sel = np.flatnonzero((idx >= first) & (idx < first + count))
         if sel.size == 0:
@@ -259,8 +262,8 @@ class LineRun:
             t = self.t_fire[fired] if fired < self.n else self.t_seg + self.move.duration
             pos = self.move.position_at(t - self.t_seg)
             column = int(self.columns[fired]) if fired < self.n else int(self.columns[-1])
-            pr.raise_fault(fault, head=head, pass_id=self.pass_id, column=column)
+            pr.raise_fault(fault, head=head, stroke=self.stroke, column=column)
             pr.carriage_stop(pos, t)
-        pr.log("line", pass_id=self.pass_id, forward=self.forward, first_column=int(self.first),
+        pr.log("line", stroke=self.stroke, forward=self.forward, first_column=int(self.first),
                fires=int(self.n), fired=int(fired), fault=fault.name, pauses=self.pauses,
                min_fifo_words=None if self.min_level is None else self.min_level * P.WORDS_PER_FIRE)

@@ -62,7 +62,7 @@ class Printer:
         self.enabled = False
         self.homed = False
         self.fault = P.Fault.NONE
-        self.fault_head, self.fault_pass, self.fault_column = 0xFF, 0, 0
+        self.fault_head, self.fault_stroke, self.fault_column = 0xFF, 0, 0
         self.position = float(POWER_UP_POSITION)    # carriage, counts from the left switch
         self.count_offset = POWER_UP_POSITION       # DSP counter = position - offset (0 at power-up)
         self.motion = P.Motion.IDLE
@@ -85,7 +85,7 @@ class Printer:
             if self.faults.starve_guard is None else bool(self.faults.starve_guard)
         self.block_decoder = P.BlockDecoder()
         self._data_out = bytearray()
-        self._pass_blocks_received = 0
+        self._stroke_blocks_received = 0
         self._move_times: list[float] = []
         self.blocks_total = 0
         self.job: dict | None = None
@@ -94,13 +94,13 @@ class Printer:
         self.jobs_done: dict[int, dict] = {}
         self.config_traces = []
         self._log_file = open(event_log, "w") if event_log else None
-        # VCD of the head interface for (pass, head, first fire, fires); see vcd.py
+        # VCD of the head interface for (stroke, head, first fire, fires); see vcd.py
         self.vcd_path, self.vcd_window = vcd_path, vcd_window
         self.vcd = None
         if vcd_path:
             from .vcd import Vcd
             self.vcd = Vcd()
-        # the 128-bit words each head latched, per pass, in firing order (tests, --latched-out)
+        # the 128-bit words each head latched, per stroke, in firing order (tests, --latched-out)
         self.record_latched = record_latched
         self.latched: dict[int, list] = {}
         self.events: deque = deque(maxlen=200_000)
@@ -165,13 +165,13 @@ class Printer:
             blocks = self.block_decoder.feed(data)
         except P.BlockError as exc:
             self.log("data_error", error=str(exc))
-            self.raise_fault(P.Fault.DATA_CRC, pass_id=self.fpga.pass_id)
+            self.raise_fault(P.Fault.DATA_CRC, stroke=self.fpga.stroke)
             return
         for block in blocks:
             self.blocks_total += 1
             if block.kind == P.BLOCK_DATA:
-                idx = self._pass_blocks_received
-                self._pass_blocks_received += 1
+                idx = self._stroke_blocks_received
+                self._stroke_blocks_received += 1
                 if idx < self.fpga.ring_blocks or idx - self.fpga.ring_blocks >= len(self._move_times):
                     ready = self.time
                 else:
@@ -180,12 +180,12 @@ class Printer:
                 ready = self.time
             fault = self.fpga.accept(block, ready)
             if block.kind == P.BLOCK_FLUSH and fault == P.Fault.NONE:
-                self._pass_blocks_received = self.fpga.blocks_moved
+                self._stroke_blocks_received = self.fpga.blocks_moved
                 self._report(P.REPORT_FLUSHED)
             if fault != P.Fault.NONE:
-                self.log("block_refused", pass_id=block.pass_id, first_fire=block.first_fire,
+                self.log("block_refused", stroke=block.stroke, first_fire=block.first_fire,
                          fault=fault.name)
-                self.raise_fault(fault, pass_id=block.pass_id, column=block.first_fire)
+                self.raise_fault(fault, stroke=block.stroke, column=block.first_fire)
             self.pump()
             if self.faults.data_drop_after is not None and \
                     self.blocks_total >= self.faults.data_drop_after:
@@ -235,7 +235,7 @@ class Printer:
         f = self.fpga
         if f.underrun_mask:
             flags |= P.REPORT_UNDERRUN
-        self._data_out += P.Report(flags, f.ring_free(), f.pass_id, f.blocks_moved, f.fired,
+        self._data_out += P.Report(flags, f.ring_free(), f.stroke, f.blocks_moved, f.fired,
                                    f.fifo_levels()).encode()
 
     def pump(self) -> None:
@@ -244,7 +244,7 @@ class Printer:
             ended = self.line.advance(self.link_alive)
             if ended:
                 self.fpga.firing = False
-                self._report(P.REPORT_PASS_DONE if self.line.fault == P.Fault.NONE else 0)
+                self._report(P.REPORT_STROKE_DONE if self.line.fault == P.Fault.NONE else 0)
             return
         while self.fpga.room_for_next() and self.fault == P.Fault.NONE:
             self.fpga.move_next()
@@ -252,11 +252,11 @@ class Printer:
             self._report(0)
 
     # -- faults -----------------------------------------------------------------------------
-    def raise_fault(self, fault: P.Fault, head: int = 0xFF, pass_id: int = 0,
+    def raise_fault(self, fault: P.Fault, head: int = 0xFF, stroke: int = 0,
                     column: int = 0) -> None:
         if self.fault != P.Fault.NONE:
             return
-        self.fault, self.fault_head, self.fault_pass, self.fault_column = fault, head, pass_id, column
+        self.fault, self.fault_head, self.fault_stroke, self.fault_column = fault, head, stroke, column
         if fault == P.Fault.FIFO_UNDERRUN and head != 0xFF:
             self.fpga.underrun_mask |= (1 << self.n_heads) - 1
         self.fpga.write_reg(P.REG_WE_EN, 0)
@@ -265,12 +265,12 @@ class Printer:
             self.line.done = True
             self.line.fault = fault
         self.motion = P.Motion.IDLE
-        self.log("fault", fault=fault.name, head=head, pass_id=pass_id, column=column,
+        self.log("fault", fault=fault.name, head=head, stroke=stroke, column=column,
                  text=P.FAULT_TEXT[fault])
 
     def clear_fault(self) -> None:
         self.fault = P.Fault.NONE
-        self.fault_head, self.fault_pass, self.fault_column = 0xFF, 0, 0
+        self.fault_head, self.fault_stroke, self.fault_column = 0xFF, 0, 0
         self.fpga.underrun_mask = 0
         for h in self.heads:
             h.temperature_c = min(h.temperature_c, h.overtemp_c - 5)
@@ -292,7 +292,7 @@ class Printer:
         motion = P.Motion.PRINTING if self.busy() else self.motion
         fires = self.fpga.fired
         return P.Status(P.Result.OK, flags, motion, self.counter(), 0, self.paper_steps,
-                        self.fpga.pass_id, fires, self.fault, self.fault_head, self.fault_pass,
+                        self.fpga.stroke, fires, self.fault, self.fault_head, self.fault_stroke,
                         self.fault_column, self.fpga.ring_free(), self.fpga.fifo_levels())
 
     def paper_present(self) -> bool:
@@ -355,7 +355,7 @@ class Printer:
         self._flush_media()
         return P.Result.OK
 
-    def set_line(self, pass_id: int, direction: int, dpi: int, first: int, count: int,
+    def set_line(self, stroke: int, direction: int, dpi: int, first: int, count: int,
                  speed: int, accel: int) -> P.Result:
         prof = self.profile
         if direction not in (0, 1) or dpi not in prof.dpi_modes or count == 0 or speed == 0 \
@@ -368,16 +368,16 @@ class Printer:
         if lo < 0 or hi > prof.rail_counts:
             return P.Result.OUT_OF_RANGE
         fp = self.fpga
-        fp.regs[P.REG_PASS_LO], fp.regs[P.REG_PASS_HI] = pass_id & 0xFFFF, pass_id >> 16
+        fp.regs[P.REG_STROKE_LO], fp.regs[P.REG_STROKE_HI] = stroke & 0xFFFF, stroke >> 16
         u = first & 0xFFFFFFFF
         fp.regs[P.REG_FIRE_START_LO], fp.regs[P.REG_FIRE_START_HI] = u & 0xFFFF, u >> 16
         fp.regs[P.REG_FIRE_COUNT_LO], fp.regs[P.REG_FIRE_COUNT_HI] = count & 0xFFFF, count >> 16
         fp.flush()
-        self._pass_blocks_received = 0
+        self._stroke_blocks_received = 0
         self._move_times = []
         self.line = None
         self.line_done = False
-        self.line_cfg = dict(pass_id=pass_id, direction=direction, dpi=dpi, first=first,
+        self.line_cfg = dict(stroke=stroke, direction=direction, dpi=dpi, first=first,
                              count=count, speed=speed, accel=accel, lo=lo, hi=hi)
         self.log("set_line", **{k: v for k, v in self.line_cfg.items()})
         return P.Result.OK
@@ -385,7 +385,7 @@ class Printer:
     def start_line(self) -> P.Result:
         cfg = self.line_cfg
         fp = self.fpga
-        if cfg is None or fp.pass_id != cfg["pass_id"]:
+        if cfg is None or fp.stroke != cfg["stroke"]:
             return P.Result.BAD_STATE
         if fp.forward != (cfg["direction"] == 0) or fp.dpi != cfg["dpi"] or not fp.we_en:
             return P.Result.BAD_STATE
@@ -412,7 +412,7 @@ class Printer:
             line.done = True
             self.fpga.firing = False
             self.motion = P.Motion.IDLE
-            self.log("line", pass_id=line.pass_id, forward=line.forward,
+            self.log("line", stroke=line.stroke, forward=line.forward,
                      first_column=int(line.first), fires=int(line.n), fired=int(self.fpga.fired),
                      fault="STOPPED", pauses=line.pauses, min_fifo_words=None)
 
@@ -446,9 +446,9 @@ class Printer:
         self.time = trace.data_nconfig_rise_ns / 1e9
         self.log("head_config", digits=len(digits), first=digits[:5])
 
-    def latched_words(self, pass_id: int) -> np.ndarray:
-        """(heads, fires, 8): what each head latched in a pass, in firing order."""
-        items = sorted(self.latched.get(pass_id, []), key=lambda it: it[0])
+    def latched_words(self, stroke: int) -> np.ndarray:
+        """(heads, fires, 8): what each head latched in a stroke, in firing order."""
+        items = sorted(self.latched.get(stroke, []), key=lambda it: it[0])
         parts = [w for _, w in items]
         return np.concatenate(parts, axis=1) if parts else np.zeros((self.n_heads, 0, 8), np.uint16)
 
@@ -460,6 +460,10 @@ class Printer:
             return                      # the host reconnected and said it again
         if self.media:
             self.media.close()
+        # a new job starts with no stroke of its own: an earlier job's last stroke (same
+        # number, same fire count) must not look like this job's (docs/protocol.md JOB_BEGIN)
+        self.line_done = False
+        self.fpga.clear_stroke()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
                         y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
         path = self.media_path(job) if callable(self.media_path) else self.media_path
@@ -480,6 +484,17 @@ class Printer:
                          lead_mm=round(self.job["y0"] * self.job["row_nm"] / 1e6, 3))
             self.jobs_done[job] = stats
             self.log("job_end", job=job, **stats)
+        self.media = None
+        self.job = None
+
+    def abandon_job(self) -> None:
+        """The host gave up on the open job (it failed or was cancelled and will not be
+        resumed): its media file is completed with what landed and blank paper after it,
+        so what the printer did can be inspected (app/api.py)."""
+        if self.media:
+            self.media.close()
+            self.log("job_abandoned", job=self.job["job"] if self.job else None,
+                     drops=[int(d) for d in self.media.drops])
         self.media = None
         self.job = None
 

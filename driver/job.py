@@ -1,8 +1,8 @@
 """The print job state machine (docs/driver.md).
 
 connect -> (head configuration) -> enable -> home -> measure paper -> place the job ->
-per pass: feed to the pass's paper position, SET_LINE, DIR/DPI/WE_EN, preload the FIFOs,
-START_LINE, stream on FIFO demand, wait for LINE_DONE, WE_EN off -> park -> report.
+per stroke: feed to the stroke's paper position, SET_LINE, DIR/DPI/WE_EN, preload the
+FIFOs, START_LINE, stream on FIFO demand, wait for LINE_DONE, WE_EN off -> park -> report.
 """
 
 from __future__ import annotations
@@ -16,16 +16,24 @@ from . import protocol as P
 from .device import Device
 from .link import DeviceError, LineTooNoisy, LinkError
 from .printer import Printer, PrinterFault, fault_message  # noqa: F401 - fault_message: re-exported
-from .stream import PassStreamer, StreamError
+from .stream import StreamError, StrokeStreamer
 from ..rip.load import ImageError
 from ..rip.pipeline import RipJob, prefetch
 from ..rip.profile import ProfileError
-from ..rip.swath import PassData
+from ..rip.swath import StrokeData
 
 log = logging.getLogger("wideprint.job")
 
 HEAD_MASK_ALL = 0xFF
-MAX_RECOVERIES = 5          # reconnections per pass before the job fails
+MAX_RECOVERIES = 5          # reconnections per stroke (or other step) before the job fails
+
+
+def resume_stroke(checkpoint: dict) -> int:
+    """The first stroke a checkpoint's job has not printed: `next_stroke`, or `next_pass`
+    in a checkpoint saved by an older version (it counted strokes under that name)."""
+    if "next_stroke" in checkpoint:
+        return int(checkpoint["next_stroke"])
+    return int(checkpoint.get("next_pass", 0))
 
 
 class JobCancelled(RuntimeError):
@@ -34,7 +42,7 @@ class JobCancelled(RuntimeError):
 
 class JobControl:
     """Operator controls, safe to call from any thread (GUI, server, signal handler).
-    Pause and cancel act at pass boundaries (cancel also stops a running line);
+    Pause and cancel act at stroke boundaries (cancel also stops a running line);
     emergency stop acts at once."""
 
     def __init__(self) -> None:
@@ -71,9 +79,9 @@ class Telemetry:
     """One snapshot of a job and its printer, for the GUI, the server and the CLI."""
     state: str = "queued"            # queued, connecting, printing, paused, done, failed, cancelled
     detail: str = ""
-    pass_index: int | None = None
-    passes_total: int = 0
-    passes_printed: int = 0
+    stroke_index: int | None = None
+    strokes_total: int = 0
+    strokes_printed: int = 0
     carriage_counts: int = 0
     paper_steps: int = 0
     fires_done: int = 0
@@ -86,20 +94,20 @@ class Telemetry:
 
 class JobError(RuntimeError):
     """A job that cannot be printed or was stopped by a device fault; the message says why
-    and where (pass, column, head)."""
+    and where (stroke, column, head)."""
 
-    def __init__(self, message: str, fault: int = 0, pass_id: int | None = None):
+    def __init__(self, message: str, fault: int = 0, stroke: int | None = None):
         super().__init__(message)
-        self.fault, self.pass_id = fault, pass_id
+        self.fault, self.stroke = fault, stroke
 
 
 @dataclass
 class JobReport:
     file: str
     state: str = "queued"
-    passes_total: int = 0
-    passes_printed: int = 0
-    passes_skipped: int = 0
+    strokes_total: int = 0
+    strokes_printed: int = 0
+    strokes_skipped: int = 0
     drops: list = field(default_factory=lambda: [0, 0, 0, 0])
     ink_ml: list = field(default_factory=lambda: [0.0] * 4)
     width_dots: int = 0
@@ -120,11 +128,13 @@ class PrintJob:
                  speed_mm_s: float | None = None, allow_overspeed: bool = False,
                  resume: dict | None = None):
         """resume: a checkpoint from an earlier run of the same job on the same printer
-        (the `checkpoint` event / attribute): placement, paper origin and the next pass;
-        passes before it are not printed again."""
+        (the `checkpoint` event / attribute): placement, paper origin and the next stroke;
+        strokes before it are not printed again.  A checkpoint from an older version names
+        the next stroke `next_pass`; it is read the same."""
         self.dev = device
         self.resume = resume
         self.checkpoint: dict = {}
+        self._started: set[int] = set()      # strokes this run sent SET_LINE for
         self.speed_mm_s = speed_mm_s
         self.allow_overspeed = allow_overspeed
         self.rip = rip
@@ -295,66 +305,85 @@ class PrintJob:
         raise LinkError(f"cannot reconnect to the printer: {last}"
                         + (f" (the serial line's measured bit error rate is {ber:.1e})" if ber else ""))
 
-    def print_pass(self, pd: PassData, x0: int) -> None:
-        self._recovering(lambda: self._print_pass_once(pd, x0), f"pass {pd.index}")
+    def print_stroke(self, stroke: StrokeData, x0: int) -> None:
+        self._recovering(lambda: self._print_stroke_once(stroke, x0), f"stroke {stroke.index}")
 
-    def _print_pass_once(self, pd: PassData, x0: int) -> None:
+    def _print_stroke_once(self, stroke: StrokeData, x0: int) -> None:
         link, prof = self.dev.link, self.profile
         dpi = self.rip.settings.dpi
         k = prof.k(dpi)
-        first = x0 // k + pd.first_column
+        first = x0 // k + stroke.first_column
         info = self.dev.info or {}
-        streamer = PassStreamer(self.dev.data, pd.index, pd.words,
-                                info.get("block_fires", prof.block_fires),
-                                info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
         st = link.status()
-        if st.pass_id == pd.index and st.motion == P.Motion.IDLE and \
-                st.flags & P.FLAG_LINE_DONE and st.fires_done == pd.fires:
+        # The stroke registers may still describe another job's (or copy's) last line with
+        # the same number and length: only a line this job started (before a lost link),
+        # or the one a resumed job stopped in, may be taken as its own.
+        ours = stroke.index in self._started or (
+            self.resume is not None and stroke.index == resume_stroke(self.resume))
+        if ours and st.stroke == stroke.index and st.motion == P.Motion.IDLE and \
+                st.flags & P.FLAG_LINE_DONE and st.fires_done == stroke.fires:
             link.write_reg(P.REG_WE_EN, 0)          # it finished while we were away
             return
-        if st.pass_id == pd.index and st.motion == P.Motion.PRINTING:
+        # A resumed job whose stroke a printer fault stopped part-way (the fault cleared
+        # since): the columns fired stay printed, the line goes on from the next one
+        # (docs/driver.md, "Resuming after a fault").
+        done = st.fires_done if (ours and st.stroke == stroke.index and st.motion == P.Motion.IDLE
+                                 and 0 < st.fires_done < stroke.fires) else 0
+        fires = stroke.fires - done
+        streamer = StrokeStreamer(self.dev.data, stroke.index, stroke.words[:, done:],
+                                  info.get("block_fires", prof.block_fires),
+                                  info.get("ring_blocks", prof.ring_blocks), HEAD_MASK_ALL)
+        if ours and st.stroke == stroke.index and st.motion == P.Motion.PRINTING:
             streamer.resume()                       # the line is running or starved: feed it
         else:
+            self._started.add(stroke.index)
+            if done:
+                log.info("stroke %d: resuming after column %d of %d", stroke.index, done, stroke.fires)
+                self.on_event("stroke_resumed", index=stroke.index, fires_done=done)
+            # forward strokes fire their columns upwards, reverse ones downwards: the columns
+            # left are the top ones going forward and the bottom ones going back
+            start = first + done if stroke.direction == 0 else first
             speed, accel = self.line_speed(), prof.accel_counts_s2()
-            link.call(P.Op.SET_LINE, pass_id=pd.index, direction=pd.direction, dpi=dpi,
-                      fire_start=first, fire_count=pd.fires, speed=speed, accel=accel)
-            link.write_reg(P.REG_DIR, 1 if pd.direction == 0 else 0)
+            link.call(P.Op.SET_LINE, stroke=stroke.index, direction=stroke.direction, dpi=dpi,
+                      fire_start=start, fire_count=fires, speed=speed, accel=accel)
+            link.write_reg(P.REG_DIR, 1 if stroke.direction == 0 else 0)
             link.write_reg(P.REG_DPI, P.DPI_CODE[dpi])
             link.write_reg(P.REG_WE_EN, 1)
             streamer.preload()
             link.command(P.Op.START_LINE)
         streamer.start()
         try:
-            st = self._watch_line(pd, streamer)
+            st = self._watch_line(stroke, streamer)
         finally:
             streamer.stop()
         if streamer.error is not None:
             raise StreamError(str(streamer.error))
-        if st.fires_done != pd.fires:
-            raise JobError(f"pass {pd.index}: {st.fires_done} of {pd.fires} columns fired")
+        if st.fires_done != fires:
+            raise JobError(f"stroke {stroke.index}: {st.fires_done} of {fires} columns fired")
         link.write_reg(P.REG_WE_EN, 0)
         if streamer.min_fifo_words is not None:
             m = self.report.min_fifo_words
             self.report.min_fifo_words = streamer.min_fifo_words if m is None else min(m, streamer.min_fifo_words)
 
-    def _watch_line(self, pd: PassData, streamer: PassStreamer) -> P.Status:
+    def _watch_line(self, stroke: StrokeData, streamer: StrokeStreamer) -> P.Status:
         link, prof = self.dev.link, self.profile
-        deadline = time.monotonic() + 60 + pd.fires / 1000
+        deadline = time.monotonic() + 60 + stroke.fires / 1000
         while True:
             if self.control.estop_requested.is_set():
                 self._estop()
             elif self.control.cancelled.is_set():
                 link.command(P.Op.STOP)
-                raise JobCancelled(f"cancelled during pass {pd.index}")
+                raise JobCancelled(f"cancelled during stroke {stroke.index}")
             st = self.printer.status()
             if st.fault != P.Fault.NONE:
-                raise JobError(f"pass {pd.index}: {fault_message(st, prof)}", st.fault, pd.index)
+                raise JobError(f"stroke {stroke.index}: {fault_message(st, prof)}", st.fault,
+                               stroke.index)
             if streamer.error is not None:      # the device's own report (above) comes first
                 raise StreamError(str(streamer.error))
             if streamer.done and st.flags & P.FLAG_LINE_DONE and st.motion == P.Motion.IDLE:
                 return st
             if time.monotonic() > deadline:
-                raise JobError(f"pass {pd.index}: the line did not finish")
+                raise JobError(f"stroke {stroke.index}: the line did not finish")
             time.sleep(self.poll_interval or 0.001)
 
     # -- the whole job -------------------------------------------------------------------------
@@ -374,7 +403,7 @@ class PrintJob:
             self._read_head_temps()
             self._state("printing")
             x0 = self.resume["x0"] if self.resume else self._recovering(self.place, "placing the job")
-            rep.passes_total = self.telemetry.passes_total = planner.total_passes
+            rep.strokes_total = self.telemetry.strokes_total = planner.total_strokes
             link = self.dev.link
             top = self.top_rows()                # the top margin: image row 0 that much later
             begin = dict(job=self.job_id, x0=x0, width=rip.width, height=rip.height,
@@ -382,36 +411,36 @@ class PrintJob:
             self._recovering(lambda: link.call(P.Op.JOB_BEGIN, **begin), "starting the job")
             paper0 = self.resume["paper0"] if self.resume else self._recovering(
                 lambda: link.status().paper_steps, "reading the paper position")
-            next_pass = self.resume["next_pass"] if self.resume else 0
-            self._checkpoint(x0=x0, paper0=paper0, next_pass=next_pass)
+            next_stroke = resume_stroke(self.resume) if self.resume else 0
+            self._checkpoint(x0=x0, paper0=paper0, next_stroke=next_stroke)
             top0 = planner.top_row(0) - top
-            for pd in prefetch(rip.passes(planner), depth=2):
-                if pd.index < next_pass:             # printed before the interruption
-                    rep.passes_printed += 1
+            for stroke in prefetch(rip.strokes(planner), depth=2):
+                if stroke.index < next_stroke:       # printed before the interruption
+                    rep.strokes_printed += 1
                     for c in range(4):
-                        rep.drops[c] += int(pd.dots[c])
+                        rep.drops[c] += int(stroke.dots[c])
                     continue
-                self._between_passes(pd.index)
-                self.telemetry.pass_index = pd.index
-                target = paper0 + prof.feed_steps_for_rows(pd.top_row - top0)
-                self._recovering(lambda: self.feed_to(target), f"feed before pass {pd.index}")
-                self.on_event("pass", index=pd.index, total=planner.total_passes,
-                              direction=pd.direction, fires=pd.fires)
-                self.print_pass(pd, x0)
-                rep.passes_printed += 1
-                self.telemetry.passes_printed = rep.passes_printed
-                self._checkpoint(next_pass=pd.index + 1)
+                self._between_strokes(stroke.index)
+                self.telemetry.stroke_index = stroke.index
+                target = paper0 + prof.feed_steps_for_rows(stroke.top_row - top0)
+                self._recovering(lambda: self.feed_to(target), f"feed before stroke {stroke.index}")
+                self.on_event("stroke", index=stroke.index, total=planner.total_strokes,
+                              direction=stroke.direction, fires=stroke.fires)
+                self.print_stroke(stroke, x0)
+                rep.strokes_printed += 1
+                self.telemetry.strokes_printed = rep.strokes_printed
+                self._checkpoint(next_stroke=stroke.index + 1)
                 self._read_head_temps()
                 for c in range(4):
-                    rep.drops[c] += int(pd.dots[c])
+                    rep.drops[c] += int(stroke.dots[c])
             # feed the last rows out past the heads, then park
             out = paper0 + prof.feed_steps_for_rows(
-                planner.top_row(planner.total_passes - 1) - top0 + prof.swath_rows)
+                planner.top_row(planner.total_strokes - 1) - top0 + prof.swath_rows)
             self._recovering(lambda: self.feed_to(out), "feeding the job out")
             self._recovering(lambda: link.call(P.Op.JOB_END, job=self.job_id),
                              "ending the job")
             self._recovering(lambda: self._command(lambda: self.printer.park(wait=False)), "parking")
-            rep.passes_skipped = rep.passes_total - rep.passes_printed
+            rep.strokes_skipped = rep.strokes_total - rep.strokes_printed
             rep.state = "done"
             self._state("done")
         except JobCancelled as exc:
@@ -425,7 +454,7 @@ class PrintJob:
             rep.message = self._failure_words(exc)
             self._safe_stop()
             self._state("failed", rep.message)
-            raise JobError(rep.message, getattr(exc, "fault", 0), getattr(exc, "pass_id", None)) from exc
+            raise JobError(rep.message, getattr(exc, "fault", 0), getattr(exc, "stroke", None)) from exc
         finally:
             rep.retries = self.dev.link.retries
             self.telemetry.recoveries = rep.recoveries
@@ -459,18 +488,18 @@ class PrintJob:
         finally:
             raise JobError("emergency stop by the operator", P.Fault.ESTOP)
 
-    def _between_passes(self, next_index: int) -> None:
+    def _between_strokes(self, next_index: int) -> None:
         c = self.control
         if c.estop_requested.is_set():
             self._estop()
         if c.paused and not c.cancelled.is_set():
-            self._state("paused", f"before pass {next_index}")
+            self._state("paused", f"before stroke {next_index}")
             c.wait_while_paused()
             self._state("printing")
         if c.estop_requested.is_set():
             self._estop()
         if c.cancelled.is_set():
-            raise JobCancelled(f"cancelled before pass {next_index}")
+            raise JobCancelled(f"cancelled before stroke {next_index}")
 
     def _safe_stop(self) -> None:
         """After a failure: heads off, carriage stopped; errors here are secondary."""

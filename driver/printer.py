@@ -41,7 +41,7 @@ def fault_message(st: P.Status, profile) -> str:
     if st.fault_head != 0xFF and st.fault_head < len(profile.heads):
         where.append(f"head {profile.heads[st.fault_head].name}")
     if st.fault in _LOCATED:
-        where.append(f"stroke {st.fault_pass}")
+        where.append(f"stroke {st.fault_stroke}")
         where.append(f"column {st.fault_column}")
     return text + (f" ({', '.join(where)})" if where else "")
 
@@ -133,7 +133,7 @@ class Printer:
         while True:
             st = self.status()
             if st.fault != P.Fault.NONE:
-                raise PrinterFault(f"{what}: {fault_message(st, self.profile)}", st.fault, st.fault_pass)
+                raise PrinterFault(f"{what}: {fault_message(st, self.profile)}", st.fault, st.fault_stroke)
             if done(st):
                 return st
             if time.monotonic() > deadline:
@@ -153,7 +153,7 @@ class Printer:
                 st = self.status()
                 if st.fault != P.Fault.NONE:
                     raise PrinterFault(f"{P.op_name(op)} refused: {fault_message(st, self.profile)}",
-                                       st.fault, st.fault_pass) from None
+                                       st.fault, st.fault_stroke) from None
             raise
 
     # -- machine commands -----------------------------------------------------------------
@@ -199,6 +199,15 @@ class Printer:
         self.call(P.Op.FEED, steps=int(steps), profile=1 if f.profile == "sigmoid" else 0,
                   max_rate=int(f.max_steps_s), accel=int(f.accel_steps_s2))
         return self.wait_idle("feeding paper") if wait else None
+
+    def feed_to(self, target_steps: int) -> P.Status:
+        """Feed the paper to an absolute position (stepper steps since power-up).  Safe to
+        repeat after a lost answer: the move is computed from where the paper is."""
+        st = self.status()
+        if st.paper_steps != target_steps:
+            self.feed_steps(target_steps - st.paper_steps, wait=False)
+            st = self.wait_idle("feeding paper")
+        return st
 
     def feed(self, mm: float, wait: bool = True) -> int:
         """Feed the paper by `mm` millimetres; the steps made."""

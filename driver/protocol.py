@@ -39,6 +39,9 @@ SUPPORTED_BAUDS = (57600, 115200, 230400, 460800, 921600)
 MAX_TRIES = 3               # seed 004: three consecutive failures abandon and report
 
 
+NO_STROKE = 0xFFFFFFFF      # GET_STATUS stroke id after JOB_BEGIN, before the job's first line
+
+
 class Kind(enum.IntEnum):
     COMMAND = 0x43   # 'C' host -> DSP
     RESPONSE = 0x52  # 'R' DSP -> host, same SEQ as the command it answers
@@ -159,8 +162,8 @@ REG_STATUS = 0x8000       # read: D0 DIR, D1 DPI(600), D2 WE_EN, D3 DPI(300), D4
 REG_DIR = 0x8001          # 0x0001 forward, 0x0000 reverse
 REG_DPI = 0x8002          # 0x0000 150 dpi, 0x0001 600 dpi (seed), 0x0002 300 dpi (extension)
 REG_WE_EN = 0x8003        # 0x0001 print enable
-REG_PASS_LO = 0x8004
-REG_PASS_HI = 0x8005
+REG_STROKE_LO = 0x8004    # the stroke the FIFOs are loaded for (extension)
+REG_STROKE_HI = 0x8005
 REG_FIRE_START_LO = 0x8006
 REG_FIRE_START_HI = 0x8007
 REG_FIRE_COUNT_LO = 0x8008
@@ -462,9 +465,9 @@ decl(Op.ENABLE, request="on:u8", echo=True)
 decl(Op.HOME)
 decl(Op.MEASURE_PAPER)
 decl(Op.GET_PAPER, response="present:u8 left:i32 right:i32")
-decl(Op.SET_LINE, request="pass_id:u32 direction:u8 dpi:u16 fire_start:i32 fire_count:u32 "
+decl(Op.SET_LINE, request="stroke:u32 direction:u8 dpi:u16 fire_start:i32 fire_count:u32 "
      "speed:u32 accel:u32", echo=True)
-decl(Op.START_LINE, response="pass_id:u32")
+decl(Op.START_LINE, response="stroke:u32")
 decl(Op.FEED, request="steps:i32 profile:u8 max_rate:u32 accel:u32", echo=True)
 decl(Op.WRITE_REG, request="addr:u16 value:u16", echo=True)
 decl(Op.READ_REG, request="addr:u16", response="addr:u16 value:u16")
@@ -472,7 +475,7 @@ decl(Op.HEAD_CONFIG_DATA, request="first:u16 digits:nibbles", response="held:u16
 decl(Op.HEAD_CONFIG_LOAD, request="count:u16 crc:u32", echo=True)
 decl(Op.HEAD_STATUS, response="heads:{temperature:i16 piezo:u16 flags:u8}[]")
 decl(Op.GET_STATUS, response="flags:u16 motion:u8 carriage:i32 speed:i32 paper_steps:i32 "
-     "pass_id:u32 fires_done:u32 fault:u8 fault_head:u8 fault_pass:u32 fault_column:i32 "
+     "stroke:u32 fires_done:u32 fault:u8 fault_head:u8 fault_stroke:u32 fault_column:i32 "
      "ring_free:u8 fifo:u16[8]")
 decl(Op.STOP)
 decl(Op.ESTOP)
@@ -513,11 +516,11 @@ class Status:
     carriage: int          # encoder counts (x4)
     speed: int             # counts per second, signed
     paper_steps: int       # feed steps made since power-up
-    pass_id: int
+    stroke: int            # the carriage stroke (print line) the FIFOs are loaded for
     fires_done: int
     fault: int
     fault_head: int
-    fault_pass: int
+    fault_stroke: int
     fault_column: int
     ring_free: int
     fifo: tuple[int, ...]
@@ -545,27 +548,27 @@ if tuple(f.name for f in fields(Status)) != ("result", *_STATUS.names):
 # -- data channel (section 3) --------------------------------------------------------------
 BLOCK_MAGIC = b"WPD1"
 REPORT_MAGIC = b"WPR1"
-BLOCK_HEADER = struct.Struct("<4sBBHIII")   # magic, type, head mask, fires, pass, first fire, words
+BLOCK_HEADER = struct.Struct("<4sBBHIII")   # magic, type, head mask, fires, stroke, first fire, words
 BLOCK_DATA = 0x01
 BLOCK_FLUSH = 0x02
-REPORT = struct.Struct("<4sBBHIII8H")        # magic, type, flags, ring free, pass, blocks, fires, fifo[8]
+REPORT = struct.Struct("<4sBBHIII8H")        # magic, type, flags, ring free, stroke, blocks, fires, fifo[8]
 REPORT_TYPE = 0x81
 REPORT_UNDERRUN = 1 << 0
 REPORT_DATA_ERROR = 1 << 1
-REPORT_PASS_DONE = 1 << 2
+REPORT_STROKE_DONE = 1 << 2
 REPORT_FLUSHED = 1 << 3     # the answer to a FLUSH block: `blocks` = where to resume
 WORDS_PER_FIRE = 8          # 128 nozzles / 16-bit FIFO words
 MAX_BLOCK_WORDS = 65536
 
 
-def encode_block(pass_id: int, first_fire: int, head_mask: int, words: np.ndarray,
+def encode_block(stroke: int, first_fire: int, head_mask: int, words: np.ndarray,
                  kind: int = BLOCK_DATA) -> bytes:
     """words: uint16 (heads_in_mask, fires, 8), fire order, one part per head (ascending)."""
     words = np.ascontiguousarray(words, dtype="<u2")
     parts, fires = (words.shape[0], words.shape[1]) if words.size else (0, 0)
     if parts != bin(head_mask).count("1") and kind == BLOCK_DATA:
         raise ValueError("one part per head in the mask")
-    header = BLOCK_HEADER.pack(BLOCK_MAGIC, kind, head_mask, fires, pass_id, first_fire,
+    header = BLOCK_HEADER.pack(BLOCK_MAGIC, kind, head_mask, fires, stroke, first_fire,
                                words.size)
     payload = words.tobytes()
     return header + payload + crc32(header + payload).to_bytes(4, "little")
@@ -576,7 +579,7 @@ class Block:
     kind: int
     head_mask: int
     fires: int
-    pass_id: int
+    stroke: int
     first_fire: int
     words: np.ndarray     # uint16 (parts, fires, 8)
 
@@ -601,7 +604,7 @@ class BlockDecoder:
                 nxt = buf.find(BLOCK_MAGIC, 1)
                 del buf[: nxt if nxt > 0 else len(buf) - 3]
                 raise BlockError("data channel out of sync (no block magic)")
-            magic, kind, mask, fires, pass_id, first, nwords = BLOCK_HEADER.unpack_from(buf)
+            magic, kind, mask, fires, stroke, first, nwords = BLOCK_HEADER.unpack_from(buf)
             parts = bin(mask).count("1")
             if nwords != parts * fires * WORDS_PER_FIRE or nwords > MAX_BLOCK_WORDS:
                 del buf[:4]
@@ -613,9 +616,9 @@ class BlockDecoder:
             crc = int.from_bytes(buf[total - 4:total], "little")
             if crc32(bytes(buf[:total - 4])) != crc:
                 del buf[:total]
-                raise BlockError(f"block CRC error (pass {pass_id}, fire {first})")
+                raise BlockError(f"block CRC error (stroke {stroke}, fire {first})")
             words = np.frombuffer(bytes(buf[BLOCK_HEADER.size:total - 4]), dtype="<u2")
-            out.append(Block(kind, mask, fires, pass_id, first,
+            out.append(Block(kind, mask, fires, stroke, first,
                              words.reshape(parts, fires, WORDS_PER_FIRE) if nwords else
                              np.zeros((0, 0, WORDS_PER_FIRE), np.uint16)))
             del buf[:total]
@@ -626,13 +629,13 @@ class BlockDecoder:
 class Report:
     flags: int
     ring_free: int
-    pass_id: int
+    stroke: int
     blocks: int
     fires_done: int
     fifo: tuple[int, ...]
 
     def encode(self) -> bytes:
-        body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, self.flags, self.ring_free, self.pass_id,
+        body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, self.flags, self.ring_free, self.stroke,
                            self.blocks, self.fires_done, *self.fifo)
         return body + crc32(body).to_bytes(4, "little")
 

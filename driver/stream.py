@@ -1,4 +1,4 @@
-"""The data channel, host side: a pass's nozzle words cut into blocks and sent on DMA-ring
+"""The data channel, host side: a stroke's nozzle words cut into blocks and sent on DMA-ring
 credit (docs/protocol.md section 3.2)."""
 
 from __future__ import annotations
@@ -15,22 +15,22 @@ class StreamError(ConnectionError):
     pass
 
 
-def pass_blocks(pass_id: int, words: np.ndarray, block_fires: int, head_mask: int):
-    """Yield (first_fire, encoded block) for a pass's words (heads, fires, 8)."""
+def stroke_blocks(stroke: int, words: np.ndarray, block_fires: int, head_mask: int):
+    """Yield (first_fire, encoded block) for a stroke's words (heads, fires, 8)."""
     fires = words.shape[1]
     for first in range(0, fires, block_fires):
         part = words[:, first:first + block_fires]
-        yield first, P.encode_block(pass_id, first, head_mask, part)
+        yield first, P.encode_block(stroke, first, head_mask, part)
 
 
-class PassStreamer:
-    """Sends one pass's blocks, never more than `ring` ahead of the FPGA's reports."""
+class StrokeStreamer:
+    """Sends one stroke's blocks, never more than `ring` ahead of the FPGA's reports."""
 
-    def __init__(self, data, pass_id: int, words: np.ndarray, block_fires: int, ring: int,
+    def __init__(self, data, stroke: int, words: np.ndarray, block_fires: int, ring: int,
                  head_mask: int):
         self.data = data
-        self.pass_id = pass_id
-        self.blocks = list(pass_blocks(pass_id, words, block_fires, head_mask))
+        self.stroke = stroke
+        self.blocks = list(stroke_blocks(stroke, words, block_fires, head_mask))
         self.ring = ring
         self.sent = 0
         self.acked = 0
@@ -46,7 +46,7 @@ class PassStreamer:
 
     def _reports(self, timeout: float) -> None:
         for rep in self.decoder.feed(self.data.recv(timeout)):
-            if rep.pass_id != self.pass_id:
+            if rep.stroke != self.stroke:
                 continue
             self.acked = max(self.acked, rep.blocks)
             level = min(rep.fifo)
@@ -59,7 +59,7 @@ class PassStreamer:
             try:
                 self.data.send(self.blocks[self.sent][1])
             except (ConnectionError, OSError) as exc:
-                raise StreamError(f"pass {self.pass_id}: data link lost ({exc})") from exc
+                raise StreamError(f"stroke {self.stroke}: data link lost ({exc})") from exc
             self.sent += 1
             self._reports(0.0)
         if self.sent < len(self.blocks) and timeout:
@@ -70,18 +70,18 @@ class PassStreamer:
         that is not in its FIFOs (the FLUSHED report says which)."""
         self._stop.clear()
         try:
-            self.data.send(P.encode_block(self.pass_id, 0, 0, np.zeros((0, 0, 8), np.uint16),
+            self.data.send(P.encode_block(self.stroke, 0, 0, np.zeros((0, 0, 8), np.uint16),
                                           kind=P.BLOCK_FLUSH))
         except (ConnectionError, OSError) as exc:
-            raise StreamError(f"pass {self.pass_id}: data link lost ({exc})") from exc
+            raise StreamError(f"stroke {self.stroke}: data link lost ({exc})") from exc
         deadline = time.monotonic() + timeout
         while True:
             for rep in self.decoder.feed(self.data.recv(0.02)):
-                if rep.pass_id == self.pass_id and rep.flags & P.REPORT_FLUSHED:
+                if rep.stroke == self.stroke and rep.flags & P.REPORT_FLUSHED:
                     self.sent = self.acked = rep.blocks
                     return
             if time.monotonic() > deadline:
-                raise StreamError(f"pass {self.pass_id}: the printer did not answer the FLUSH")
+                raise StreamError(f"stroke {self.stroke}: the printer did not answer the FLUSH")
 
     def preload(self, timeout: float = 5.0) -> None:
         """Fill the ring and the FIFOs before the carriage moves."""
@@ -95,7 +95,7 @@ class PassStreamer:
 
     # -- the streaming thread: keeps the ring full while the main thread watches status ----
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name=f"stream-pass-{self.pass_id}",
+        self._thread = threading.Thread(target=self._run, name=f"stream-stroke-{self.stroke}",
                                         daemon=True)
         self._thread.start()
 

@@ -1,7 +1,7 @@
-"""The RIP as one streaming pipeline: file -> bands -> CMYK -> halftone -> passes.
+"""The RIP as one streaming pipeline: file -> bands -> CMYK -> halftone -> strokes.
 
 Pure: the same file and settings always give the same bits.  Every stage works on bands
-of `band_rows` rows, so memory is bounded by the band and the pass window, never by the
+of `band_rows` rows, so memory is bounded by the band and the planner window, never by the
 image length.
 """
 
@@ -22,12 +22,12 @@ from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
 from .screen import OrderedScreen
 from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the settings schema's objects
-from .swath import PassData, PassPlanner, pack_dots, unpack_dots
+from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
 
 
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:
     """Run a generator in a background thread, `depth` items ahead, so the RIP works on
-    the next passes while the printer prints this one.  Exceptions arrive in order."""
+    the next strokes while the printer prints this one.  Exceptions arrive in order."""
     import queue
     import threading
     q: queue.Queue = queue.Queue(maxsize=depth)
@@ -75,7 +75,7 @@ def profile_curves(profile: Profile) -> np.ndarray | None:
 
 class PrintableJob:
     """What the driver prints: an image area of width x height device dots, its halftone
-    bands, and the passes planned from them.  Subclasses give `halftone_bands()` (dots,
+    bands, and the strokes planned from them.  Subclasses give `halftone_bands()` (dots,
     (h, W, 4) 0/1) and may give `packed_bands()` (the same as bits, (h, 4, W/8)) when they
     can make those more cheaply; the planner works on bits."""
     path: str
@@ -95,12 +95,12 @@ class PrintableJob:
         for band in self.halftone_bands():
             yield pack_dots(band)
 
-    def planner(self) -> PassPlanner:
+    def planner(self) -> StrokePlanner:
         s = self.settings
-        return PassPlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                           s.pass_mask)
+        return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
+                             s.pass_mask)
 
-    def passes(self, planner: PassPlanner | None = None) -> Iterator[PassData]:
+    def strokes(self, planner: StrokePlanner | None = None) -> Iterator[StrokeData]:
         planner = planner or self.planner()
         for bits in self.packed_bands():
             yield from planner.feed_packed(bits)
@@ -123,7 +123,7 @@ class PrintableJob:
 @dataclass
 class RipJob(PrintableJob):
     """One file ripped for one printer: the image placed on the device grid (columns at the
-    dpi mode, rows at the profile's row pitch; rip/place.py), halftoned, planned into passes."""
+    dpi mode, rows at the profile's row pitch; rip/place.py), halftoned, planned into strokes."""
     path: str
     settings: RipSettings = field(default_factory=RipSettings)
     profile: Profile = field(default_factory=load_profile)
@@ -168,7 +168,7 @@ class RipJob(PrintableJob):
         sep = self._separator()
         ht = Halftoner(self.settings.dither, self.width, channels=4)
         # two stages on two cores: loading and separating the next band overlaps the
-        # halftoning and pass packing of this one
+        # halftoning and stroke packing of this one
         separated = (sep.convert(band) for band in self.source.bands(self.settings.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
@@ -176,7 +176,7 @@ class RipJob(PrintableJob):
     def packed_bands(self) -> Iterator[np.ndarray]:
         """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
         path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
-        next bands (on both cores) overlaps the pass packing of this one."""
+        next bands (on both cores) overlaps the stroke packing of this one."""
         s = self.settings
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
             yield from prefetch(prescreened_packed(self.source, s.band_rows), depth=1)
@@ -186,7 +186,7 @@ class RipJob(PrintableJob):
             return
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
         # three stages: libvips reads band k+2 while both cores screen band k+1 and
-        # the caller packs the passes of band k
+        # the caller packs the strokes of band k
         loaded = prefetch(self.source.bands(s.band_rows), depth=1)
         yield from prefetch((screen.process(band) for band in loaded), depth=1)
 

@@ -435,9 +435,9 @@ class LayoutSection(_Section):
                                    "prints")
     dead_nozzles: frozenset[tuple[int, int]] = _key(
         _DeadNozzles(), [], doc="head names; nozzles that fire otherwise. Loaded as "
-        "(head index, nozzle); the pass planner prints around them")
+        "(head index, nozzle); the stroke planner prints around them")
     bidir_offset_columns: dict[int, int] = _key(_DpiTable(_Num(True), fill=0), {},
-                                                doc="columns reverse passes are shifted by (bidir "
+                                                doc="columns reverse strokes are shifted by (bidir "
                                                 "alignment)")
 
     @property
@@ -724,7 +724,7 @@ class Profile:
 
     @property
     def swath_rows(self) -> int:
-        """Rows spanned by one colour's heads in one pass (slots 0 .. swath_rows-1)."""
+        """Rows spanned by one colour's heads in one stroke (slots 0 .. swath_rows-1)."""
         return max(h.y_rows for h in self.heads) + (self.nozzles - 1) * self.heads_per_color + 1
 
     def k(self, dpi: int) -> int:
@@ -756,7 +756,7 @@ class Profile:
 
     def usable_slots(self) -> tuple[int, int]:
         """The longest run of slots [first, last+1) that every colour can print with all
-        nozzles alive; dead nozzles inside it are the pass planner's business."""
+        nozzles alive; dead nozzles inside it are the stroke planner's business."""
         ok = (self.slot_table(include_dead=False)[:, :, 0] >= 0).all(axis=0)
         best, start = (0, 0), None
         for slot, good in enumerate(list(ok) + [False]):

@@ -4,7 +4,7 @@ With an ordered method a pixel's drops depend only on its own ink and the thresh
 so the RIP need not make a band's CMYK and 0/1 planes at all.  Row by row, the kernel
 separates into a scratch row that stays in cache (rip/color.py's LUT kernel, then ink limit
 and curves), compares it with the mask's threshold row and writes packed bits straight in
-the pass planner's window layout: ``(rows, 4, ceil(width / 8))``, x = 0 in bit 7 of byte 0
+the stroke planner's window layout: ``(rows, 4, ceil(width / 8))``, x = 0 in bit 7 of byte 0
 (``np.packbits`` order).  The bits are exactly ``Halftoner.process(Separator.convert(band))``
 packed: tests/test_screen.py checks it across modes, limits, curves and band splits.
 docs/rip.md has the measurements.

@@ -1,17 +1,22 @@
-"""Swath and pass planner: halftone rows -> per-pass, per-head 128-bit nozzle words.
+"""Swath and stroke planner: halftone rows -> per-stroke, per-head 128-bit nozzle words.
+
+Words (docs/architecture.md): a *pass* is one interleave pass of the weave (the `passes`
+setting: every row is printed by N passes, each with other nozzles); a *stroke* is one
+movement of the carriage printing one swath.  The planner turns the weave's N passes into
+the job's strokes: stroke i prints pass j of the rows it covers.
 
 The geometry is docs/geometry.md; in short, with N passes and A rows of paper advance:
 - a colour's heads print swath slots 0 .. swath_rows-1; only the profile's usable run
   [s0, s0 + N*A) is used (nozzles 0 and 127 never fire);
-- pass p has image row T_p = (p - N + 1) * A - s0 under slot 0, so every image row is
-  under the usable run in exactly N consecutive passes p = floor(r/A) + j, j = 0 .. N-1,
-  at slot (r mod A) + (N - 1 - j) * A + s0;
+- stroke i has image row T_i = (i - N + 1) * A - s0 under slot 0, so every image row is
+  under the usable run in exactly N consecutive strokes i = floor(r/A) + j, j = 0 .. N-1
+  (the row's pass j of the weave), at slot (r mod A) + (N - 1 - j) * A + s0;
 - the pass mask gives each dot one j (checker: (x + r) mod N; random: blue-noise ranks
   split evenly; feather: blue-noise ranks split by weights that fall off towards the ends
-  of the nozzle run, hiding pass-boundary banding); a dot whose slot is a dead nozzle
+  of the nozzle run, hiding stroke-boundary banding); a dot whose slot is a dead nozzle
   moves to the next live j (nozzle-out compensation), so no dot is lost or doubled;
 - head h fires image column x at trigger column x - x_h / k (k = counts per column);
-  reverse passes fire in descending columns, shifted by the profile's bidir offset.
+  reverse strokes fire in descending columns, shifted by the profile's bidir offset.
 Memory: a rolling window of N*A rows plus one input band.
 """
 
@@ -31,8 +36,8 @@ FEATHER = 0.25              # fraction of the nozzle run, at each end, that fade
 
 
 @dataclass
-class PassData:
-    index: int            # pass number in the job, 0-based (blank passes keep their number)
+class StrokeData:
+    index: int            # stroke number in the job, 0-based (blank strokes keep their number)
     direction: int        # 0 forward, 1 reverse
     top_row: int          # image row under swath slot 0
     first_column: int     # lowest trigger column, relative to the job origin x0 / k
@@ -44,7 +49,9 @@ class PassData:
         return self.words.shape[1]
 
 
-class PassPlanner:
+class StrokePlanner:
+    """Plans the carriage strokes of a job from the weave's passes (N = `passes`)."""
+
     def __init__(self, profile: Profile, width: int, height: int, dpi: int, passes: int = 1,
                  bidir: bool = False, mask: str = "checker"):
         if passes not in PASS_COUNTS:
@@ -60,13 +67,13 @@ class PassPlanner:
         self.advance = (s1 - s0) // passes
         if self.advance < 1:
             raise ProfileError(f"{profile.path}: too few usable nozzles for {passes} passes")
-        self.total_passes = -(-height // self.advance) + passes - 1
+        self.total_strokes = -(-height // self.advance) + passes - 1
         self._slot_table = profile.slot_table()
         self._remap = self._dead_nozzle_remap()
         self.mask = mask
         self._qmask, self._sel = self._pass_mask(mask)
         self._mask_rows, self._mask_index = self._mask_bit_rows()
-        # whole 8 x 8 blocks of dots move at once (`_pack_pass_blocks`); the per-dot kernel
+        # whole 8 x 8 blocks of dots move at once (`_pack_stroke_blocks`); the per-dot kernel
         # gives the same words (tests/test_screen.py switches this off to compare)
         self.block_pack = True
         hpc = profile.heads_per_color
@@ -81,17 +88,18 @@ class PassPlanner:
         self._store = np.zeros((0, 4, self._wbytes), np.uint8)
         self._len = 0
         self._base = 0
-        self._next_pass = 0
+        self._next_stroke = 0
         self._printed = 0
         self._rows_in = 0
 
     # -- geometry helpers (also used by tests and the driver) --------------------------
-    def top_row(self, p: int) -> int:
-        return (p - self.n + 1) * self.advance - self.s0
+    def top_row(self, i: int) -> int:
+        """Image row under swath slot 0 at stroke i."""
+        return (i - self.n + 1) * self.advance - self.s0
 
     @property
     def y0_rows(self) -> int:
-        """Paper row of image row 0, counted from swath slot 0 at the first pass."""
+        """Paper row of image row 0, counted from swath slot 0 at the first stroke."""
         return -self.top_row(0)
 
     def _dead_nozzle_remap(self) -> np.ndarray:
@@ -157,8 +165,8 @@ class PassPlanner:
         """The pass mask as packed bits, for the block packer: rows (U, th, N, tw / 8) and
         index (4, A) such that bit x (x = 0 in bit 7 of byte 0, repeating every tw columns)
         of rows[index[c, r mod A], r mod th, j] is set where the mask gives the dot at
-        (r, x) of colour c to pass-in-row j.  Colours and row phases whose selection is the
-        same share a row set (without dead nozzles or feathering there is one)."""
+        (r, x) of colour c to pass j of the weave.  Colours and row phases whose selection
+        is the same share a row set (without dead nozzles or feathering there is one)."""
         th, tw = self._qmask.shape
         assert tw % 8 == 0, "the pass mask tile must be whole bytes wide"
         sel = self._sel.reshape(-1, self._sel.shape[-1])               # (4 * A, levels)
@@ -171,14 +179,14 @@ class PassPlanner:
         return rows, index.reshape(self._sel.shape[:2]).astype(np.int64)
 
     # -- streaming ----------------------------------------------------------------------
-    def feed(self, band: np.ndarray) -> list[PassData]:
-        """Add the next halftone rows (h, W, 4) of 0/1; returns the passes now complete."""
+    def feed(self, band: np.ndarray) -> list[StrokeData]:
+        """Add the next halftone rows (h, W, 4) of 0/1; returns the strokes now complete."""
         if band.shape[1:] != (self.width, 4):
             raise ValueError(f"band must be (h, {self.width}, 4)")
         pack_dots(band, self._window_rows(band.shape[0]))
         return self._emit(final=False)
 
-    def feed_packed(self, bits: np.ndarray) -> list[PassData]:
+    def feed_packed(self, bits: np.ndarray) -> list[StrokeData]:
         """Add the next halftone rows as packed bits (h, 4, ceil(W / 8)) (`pack_dots`)."""
         if bits.shape[1:] != (4, self._wbytes) or bits.dtype != np.uint8:
             raise ValueError(f"packed band must be uint8 (h, 4, {self._wbytes})")
@@ -201,24 +209,24 @@ class PassPlanner:
         """The window's packed bits (rows, 4, width / 8)."""
         return self._store[:self._len]
 
-    def finish(self) -> list[PassData]:
+    def finish(self) -> list[StrokeData]:
         if self._rows_in != self.height:
             raise ValueError(f"got {self._rows_in} rows, expected {self.height}")
         return self._emit(final=True)
 
-    def _emit(self, final: bool) -> list[PassData]:
+    def _emit(self, final: bool) -> list[StrokeData]:
         out = []
-        while self._next_pass < self.total_passes:
-            p = self._next_pass
-            need = min((p + 1) * self.advance, self.height)
+        while self._next_stroke < self.total_strokes:
+            i = self._next_stroke
+            need = min((i + 1) * self.advance, self.height)
             if self._rows_in < need and not final:
                 break
-            data = self._build(p)
-            self._next_pass += 1
+            data = self._build(i)
+            self._next_stroke += 1
             if data is not None:
                 out.append(data)
-            # drop rows no later pass needs
-            keep_from = max(0, (self._next_pass - self.n + 1) * self.advance)
+            # drop rows no later stroke needs
+            keep_from = max(0, (self._next_stroke - self.n + 1) * self.advance)
             if keep_from > self._base:
                 drop = min(keep_from - self._base, self._len)
                 self._store[:self._len - drop] = self._store[drop:self._len]   # in place
@@ -226,8 +234,8 @@ class PassPlanner:
                 self._base = keep_from
         return out
 
-    def _build(self, p: int) -> PassData | None:
-        top = self.top_row(p)
+    def _build(self, i: int) -> StrokeData | None:
+        top = self.top_row(i)
         lo = max(0, top + self.s0)
         hi = min(self.height, top + self.s0 + self.n * self.advance)
         if hi <= lo:
@@ -246,18 +254,18 @@ class PassPlanner:
         if self.block_pack:
             words8 = words.view(np.uint8)                   # (heads, fires, 16), little-endian
             run_parallel(
-                (lambda i=i, a=a, b=b: _pack_pass_blocks(
-                    self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
+                (lambda w=w, a=a, b=b: _pack_stroke_blocks(
+                    self._buf, self.width, self._base, lo, hi, top, i, self.advance, self.n,
                     self.s0, self._mask_rows, self._mask_index, self._slot_table, channel,
-                    y_rows, cols, hpc, spread_lo, a, b, words8, dots_parts[i], spans[i]))
-                for i, (a, b) in enumerate(parts))
+                    y_rows, cols, hpc, spread_lo, a, b, words8, dots_parts[w], spans[w]))
+                for w, (a, b) in enumerate(parts))
         else:
             run_parallel(
-                (lambda i=i, a=a, b=b: _pack_pass(
-                    self._buf, self.width, self._base, lo, hi, top, p, self.advance, self.n,
+                (lambda w=w, a=a, b=b: _pack_stroke(
+                    self._buf, self.width, self._base, lo, hi, top, i, self.advance, self.n,
                     self.s0, self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
-                    hpc, spread_lo, a, b, words, dots_parts[i], spans[i]))
-                for i, (a, b) in enumerate(parts))
+                    hpc, spread_lo, a, b, words, dots_parts[w], spans[w]))
+                for w, (a, b) in enumerate(parts))
         dots = dots_parts.sum(axis=0)
         t0, t1 = int(spans[:, 0].min()), int(spans[:, 1].max())
         if t1 <= t0:
@@ -269,7 +277,7 @@ class PassPlanner:
         if direction == 1:
             words = words[:, ::-1]
             first += self._bidir_offset
-        return PassData(p, direction, top, first, np.ascontiguousarray(words), dots)
+        return StrokeData(i, direction, top, first, np.ascontiguousarray(words), dots)
 
 
 def pack_dots(band: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -307,7 +315,7 @@ def _pack_bits(band, out):
 
 @njit(cache=True, nogil=True, inline="always")
 def _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi):
-    """The image row nozzle z of head h prints in this pass, or -1 (a nozzle outside the
+    """The image row nozzle z of head h prints in this stroke, or -1 (a nozzle outside the
     usable run, dead-end or dead, or a row outside [lo, hi))."""
     slot = head_y[h] + hpc * z
     if slot < s0 or slot >= s0 + n * advance or slot >= slot_table.shape[1]:
@@ -341,15 +349,15 @@ def _popcount(x):
 
 
 @njit(cache=True, nogil=True)
-def _pack_pass_blocks(buf, width, base, lo, hi, top, p, advance, n, s0, mask_rows, mask_index,
-                      slot_table, head_channel, head_y, head_col, hpc, spread_lo, h0, h1,
-                      words8, dots, span):
+def _pack_stroke_blocks(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, mask_rows,
+                        mask_index, slot_table, head_channel, head_y, head_col, hpc, spread_lo,
+                        h0, h1, words8, dots, span):
     """Whole 8 x 8 blocks (8 nozzles x 8 columns) at once: each nozzle's byte of packed dots
-    ANDed with its byte of the pass mask (the dots this pass prints of that row,
-    `PassPlanner._mask_bit_rows`), the 8 bytes transposed into the 8 columns' bytes of
-    nozzle bits.  words8 is the words array as bytes (heads, fires, 16): byte g of a fire
+    ANDed with its byte of the pass mask (the dots this stroke prints of that row: its pass
+    j of the weave, `StrokePlanner._mask_bit_rows`), the 8 bytes transposed into the 8
+    columns' bytes of nozzle bits.  words8 is the words array as bytes (heads, fires, 16): byte g of a fire
     holds nozzles 8g .. 8g+7, bit z & 7.  span [lo, hi) widens to the fires that got a dot.
-    Same words as `_pack_pass` (tests/test_screen.py)."""
+    Same words as `_pack_stroke` (tests/test_screen.py)."""
     flat = buf.reshape(-1)                          # the window as bytes: row, colour, byte
     masks = mask_rows.reshape(-1)
     th, tb = mask_rows.shape[1], mask_rows.shape[3]
@@ -367,7 +375,7 @@ def _pack_pass_blocks(buf, width, base, lo, hi, top, p, advance, n, s0, mask_row
                                 top, lo, hi)
                 rr = r if r >= 0 else lo                         # a real row, masked off
                 offs[k] = ((rr - base) * 4 + ch) * wb
-                j = p - rr // advance
+                j = i_stroke - rr // advance
                 j = min(max(j, 0), n - 1)
                 moffs[k] = ((mask_index[ch, rr % advance] * th + rr % th) * n + j) * tb
                 if r >= 0:
@@ -425,11 +433,13 @@ def _pack_pass_blocks(buf, width, base, lo, hi, top, p, advance, n, s0, mask_row
 
 
 @njit(cache=True, nogil=True)
-def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slot_table,
-               head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words, dots, span):
-    """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that pass p
-    prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the dot's
-    pass index j = p - r // advance must equal the pass mask's (dead-nozzle remapped) j.
+def _pack_stroke(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, qmask, sel,
+                 slot_table, head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words,
+                 dots, span):
+    """Set bit z of word (head, trigger column) for every dot of rows [lo, hi) that stroke
+    i_stroke prints (docs/geometry.md): slot = y_rows + hpc*z, image row r = top + slot, the
+    row's pass of the weave j = i_stroke - r // advance must equal the pass mask's
+    (dead-nozzle remapped) j.
     span [lo, hi) widens to the fires that got a dot."""
     th, tw = qmask.shape
     for h in range(h0, h1):
@@ -438,7 +448,7 @@ def _pack_pass(buf, width, base, lo, hi, top, p, advance, n, s0, qmask, sel, slo
             r = _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi)
             if r < 0:
                 continue
-            j = p - r // advance
+            j = i_stroke - r // advance
             rho = r % advance
             row = r - base
             word = z >> 4

@@ -9,10 +9,10 @@ printed through the same planner and driver as any image.
                 stays 0 as the XJ128 requires)
 - nozzle-check: every nozzle of every head prints a short dash, staggered in eight columns,
                 so a missing dash names a dead nozzle
-- bidir-align:  printed in two passes, forward then reverse: for each candidate offset
-                o = -R..R a block of vertical bars, drawn at x by the forward pass and at
-                x + o by the reverse pass; the block whose bars continue straight across
-                the pass boundary is the correction (docs/testprints.md)
+- bidir-align:  printed in two strokes, forward then reverse: for each candidate offset
+                o = -R..R a block of vertical bars, drawn at x by the forward stroke and at
+                x + o by the reverse stroke; the block whose bars continue straight across
+                the stroke boundary is the correction (docs/testprints.md)
 - head-align:   for every head, bars at x + o next to reference bars of head K1, for
                 o = -R..R; the straight block per head is that head's correction
 """
@@ -86,7 +86,8 @@ def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
                 planes[r, x0:x0 + dash - 1, h.channel] = 1
         return planes
     if kind == "bidir-align":
-        # 1-pass bidirectional: pass 0 (forward) prints rows 0..rows-1, pass 1 (reverse) the next
+        # 1-pass bidirectional: stroke 0 (forward) prints rows 0..rows-1, stroke 1 (reverse)
+        # the next
         blocks = align_offsets()
         planes = np.zeros((2 * rows, len(blocks) * ALIGN_BLOCK, 4), np.uint8)
         for b, o in enumerate(blocks):
@@ -117,7 +118,7 @@ def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
 @dataclass
 class PatternJob(PrintableJob):
     """A test print with the RipJob interface the driver uses (width, height, settings,
-    planner(), passes(), write_planes())."""
+    planner(), strokes(), write_planes())."""
     kind: str
     planes: np.ndarray
     settings: RipSettings = field(default_factory=lambda: RipSettings(passes=1))

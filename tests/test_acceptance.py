@@ -40,7 +40,7 @@ def test_binary_cmyk_tiff_prints_bit_exact(tmp_path, profile, dpi, passes, bidir
     assert rep.drops == planes.reshape(-1, 4).sum(axis=0).tolist()
 
 
-def test_sparse_image_skips_blank_passes_and_still_matches(tmp_path, profile):
+def test_sparse_image_skips_blank_strokes_and_still_matches(tmp_path, profile):
     planes = np.zeros((1500, 200, 4), np.uint8)
     planes[10:20, 5:50, 0] = 1           # a cyan bar at the top
     planes[1400:1450, 150:190, 3] = 1    # a black bar near the bottom
@@ -48,7 +48,7 @@ def test_sparse_image_skips_blank_passes_and_still_matches(tmp_path, profile):
     rep, emu = print_on_emulator(src, RipSettings(placement=PX, passes=2, bidir=True), profile,
                                  tmp_path / "m.tif")
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
-    assert rep.passes_skipped > 0 and rep.passes_printed < rep.passes_total
+    assert rep.strokes_skipped > 0 and rep.strokes_printed < rep.strokes_total
 
 
 def test_job_wider_than_paper_is_refused_before_printing(tmp_path, profile):
@@ -77,7 +77,7 @@ def test_cli_print_media_equals_cli_rip_planes(tmp_path):
     assert np.array_equal(read_planes(media), read_planes(planes))
     rep = json.loads(report.read_text())[0]
     assert rep["state"] == "done" and rep["stray_drops"] == 0
-    assert rep["passes_printed"] > 0
+    assert rep["strokes_printed"] > 0
     # placed as asked: centred on the emulator's 3200 mm sheet, 20 mm to the left
     from wideprint.rip.profile import load_profile
     prof = load_profile()
@@ -85,6 +85,25 @@ def test_cli_print_media_equals_cli_rip_planes(tmp_path):
            if json.loads(line)["event"] == "job_end"][-1]
     width_mm = rep["width_dots"] * prof.k(300) / prof.counts_per_inch * 25.4
     assert abs(end["left_mm"] - ((3200 - width_mm) / 2 - 20)) < 0.2
+
+
+def test_cli_report_counts_strokes_not_passes(tmp_path):
+    """A 2-pass job taller than one swath takes more carriage strokes than it has passes:
+    the report counts strokes (docs/architecture.md, "Words") and the CLI says so."""
+    planes = random_planes(600, 60, seed=12)                   # 600 rows: > 126, one advance
+    src = write_cmyk_tiff(tmp_path / "tall.tif", planes)
+    exe = [sys.executable, "-m", "wideprint.app.cli"]
+    r = subprocess.run(exe + ["print", str(src), "--passes", "2", "--size", "pixels", "--json",
+                              "--media-out", str(tmp_path / "m.tif")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    (rep,) = json.loads(r.stdout)
+    assert rep["state"] == "done"
+    assert rep["strokes_total"] == -(-600 // 126) + 1                # ceil(H / A) + N - 1
+    assert rep["strokes_printed"] == rep["strokes_total"] > 2 and rep["strokes_skipped"] == 0
+    assert not any(k.startswith("passes") for k in rep)
+    assert f"printed {rep['strokes_printed']} strokes" in r.stderr
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
 
 
 def test_cli_bad_file_fails_its_job_and_the_next_prints(tmp_path):
@@ -120,7 +139,7 @@ def test_file_corrupt_far_down_fails_its_job_cleanly(tmp_path, profile):
     job = PrintJob(dev, RipJob(str(path), RipSettings(placement=PX), profile))
     with pytest.raises(JobError, match="late.tif: corrupt TIFF data"):
         job.run()
-    assert job.report.state == "failed" and job.report.passes_printed > 0
+    assert job.report.state == "failed" and job.report.strokes_printed > 0
     assert dev.emulator.fpga.we_en is False and not dev.emulator.busy()
     good = write_cmyk_tiff(tmp_path / "good.tif", random_planes(100, 80, seed=18))
     dev.emulator.media_path = str(tmp_path / "m2.tif")

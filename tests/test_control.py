@@ -1,4 +1,4 @@
-"""Operator control of a running job: pause/resume and cancel at pass boundaries,
+"""Operator control of a running job: pause/resume and cancel at stroke boundaries,
 emergency stop at once, and the telemetry the GUI and CLI show."""
 
 import threading
@@ -40,9 +40,9 @@ def test_pause_then_resume_finishes_exactly(tmp_path, profile):
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
 
 
-def test_cancel_at_a_pass_boundary(tmp_path, profile):
+def test_cancel_at_a_stroke_boundary(tmp_path, profile):
     def on_event(kind, **kw):
-        if kind == "pass" and kw["index"] == 3:
+        if kind == "stroke" and kw["index"] == 3:
             job.control.cancel()
     job, dev, planes = make_job(tmp_path, profile, on_event=on_event)
     with pytest.raises(JobCancelled):
@@ -56,7 +56,7 @@ def test_cancel_at_a_pass_boundary(tmp_path, profile):
 
 def test_emergency_stop_from_another_thread(tmp_path, profile):
     def on_event(kind, **kw):
-        if kind == "pass" and kw["index"] == 2:
+        if kind == "stroke" and kw["index"] == 2:
             threading.Thread(target=job.control.estop).start()
             time.sleep(0.05)
     job, dev, planes = make_job(tmp_path, profile, on_event=on_event)
@@ -71,12 +71,12 @@ def test_telemetry_follows_the_job(tmp_path, profile):
     seen = []
     job, dev, planes = make_job(tmp_path, profile,
                                 on_event=lambda kind, **kw: kind == "status" and seen.append(
-                                    (kw["telemetry"].pass_index, kw["telemetry"].paper_steps)))
+                                    (kw["telemetry"].stroke_index, kw["telemetry"].paper_steps)))
     rep = job.run()
     dev.emulator.close()
     t = job.telemetry
-    assert t.state == "done" and t.passes_printed == rep.passes_printed > 0
-    assert t.passes_total == rep.passes_total
+    assert t.state == "done" and t.strokes_printed == rep.strokes_printed > 0
+    assert t.strokes_total == rep.strokes_total
     assert len(t.head_temps_c) == 8 and all(20 < c < 60 for c in t.head_temps_c)
     assert len(t.fifo_words) == 8
     papers = [p for _, p in seen]

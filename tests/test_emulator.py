@@ -101,7 +101,7 @@ def test_one_nozzle_line(tmp_path, profile):
     for r in rows:
         assert (media[r, :, 0] == 1).all()                 # no breaks, no doubled dots
     assert media[:, :, 1:].sum() == 0
-    assert rep.passes_printed == 2
+    assert rep.strokes_printed == 2
 
 
 # -- seed test 2: the sawtooth ----------------------------------------------------------------
@@ -286,7 +286,7 @@ def test_fifo_flags_follow_the_level(profile):
     Device(link, None, profile).load_head_config()
     link.call(P.Op.ENABLE, on=1)
     link.command(P.Op.HOME)
-    link.call(P.Op.SET_LINE, pass_id=1, direction=0, dpi=300, fire_start=5000, fire_count=64,
+    link.call(P.Op.SET_LINE, stroke=1, direction=0, dpi=300, fire_start=5000, fire_count=64,
               speed=15000, accel=47000)
     flags = link.read_reg(P.REG_FIFO_FLAGS0)
     assert flags & P.FIFO_EMPTY and flags & P.FIFO_ALMOST_EMPTY and flags & P.FIFO_DREQ

@@ -106,7 +106,7 @@ def test_add_by_dialog_method_and_by_drop_with_previews_and_estimates(qtbot, win
     assert items[2].estimate.width_dots > 0 and win._previews[items[2].id].dots.any()
     e = items[0].estimate
     prof = load_profile(win.user_profile)
-    assert (e.width_dots, e.height_rows, e.passes) == (300, 200, 1)
+    assert (e.width_dots, e.height_rows, e.strokes) == (300, 200, 1)
     assert e.width_mm == pytest.approx(300 / 300 * 25.4)
     assert e.height_mm == pytest.approx(200 * prof.row_um / 1000)
     # the preview of a small image is the RIP's own halftone: its drops give the ink exactly
@@ -157,7 +157,7 @@ def test_settings_widgets_print_on_the_emulator_equal_to_the_rip_planes(qtbot, w
     assert media.shape == planes.shape
     assert planes.any() and np.array_equal(media, planes)
     rep = item.reports[0]
-    assert rep["passes_total"] == item.estimate.passes
+    assert rep["strokes_total"] == item.estimate.strokes
     # the live view filled in with exactly what landed (1 canvas pixel per dot here)
     assert np.array_equal(win.live.canvas_array(), render_rgb(media))
     assert "done" in win.logview.toPlainText()
@@ -236,18 +236,18 @@ def test_pause_resume_and_cancel_within_a_second(qtbot, tmp_path):
     choose(win.settings_panel.passes, 8)
     (item,) = win.add_files([str(src)])
     wait_ready(qtbot, [item])
-    assert item.estimate.passes > 20
+    assert item.estimate.strokes > 20
     win.print_queue()
-    qtbot.waitUntil(lambda: item.progress > 0, timeout=LONG)           # the 2nd pass is coming
+    qtbot.waitUntil(lambda: item.progress > 0, timeout=LONG)           # the 2nd stroke is coming
     win.actions_["pause"].trigger()
     qtbot.waitUntil(lambda: item.state == Q.PAUSED, timeout=10_000)
-    printed = win.worker.current_job.telemetry.passes_printed
+    printed = win.worker.current_job.telemetry.strokes_printed
     qtbot.wait(600)
-    assert win.worker.current_job.telemetry.passes_printed == printed   # nothing moves
+    assert win.worker.current_job.telemetry.strokes_printed == printed   # nothing moves
     win.actions_["resume"].trigger()
     qtbot.waitUntil(lambda: item.state == Q.PRINTING, timeout=5_000)
     qtbot.waitUntil(lambda: win.worker.current_job is not None and
-                    win.worker.current_job.telemetry.passes_printed > printed, timeout=LONG)
+                    win.worker.current_job.telemetry.strokes_printed > printed, timeout=LONG)
     # cancel mid-line: the job stops within a second
     qtbot.waitUntil(lambda: win.worker.current_job is not None and
                     win.worker.current_job.telemetry.fires_done > 0, timeout=LONG)
@@ -256,7 +256,7 @@ def test_pause_resume_and_cancel_within_a_second(qtbot, tmp_path):
     qtbot.waitUntil(lambda: item.state == Q.CANCELLED, timeout=1_000)
     assert time.monotonic() - t0 < 1.0
     rep = item.reports[-1]
-    assert rep["state"] == "cancelled" and rep["passes_printed"] < rep["passes_total"]
+    assert rep["state"] == "cancelled" and rep["strokes_printed"] < rep["strokes_total"]
     assert win.device.state.text().startswith("Cancelled")
     assert not win.running and win.actions_["print"].isEnabled()
 
@@ -592,7 +592,7 @@ def test_dead_nozzles_marked_after_the_nozzle_check_are_printed_around(qtbot, tm
     assert "Traceback" not in win.logview.toPlainText()            # refused, not crashed
     assert cell(win, one, Q.QueueModel.COL_STATE) == "Failed"
     assert two.state == Q.DONE, two.message
-    assert two.reports[0]["passes_total"] == two.estimate.passes
+    assert two.reports[0]["strokes_total"] == two.estimate.strokes
     assert np.array_equal(read_planes(two.media[0]), rip_planes(tmp_path, two, win))
     win.select_item(one.id)
     qtbot.waitUntil(lambda: "2 or more passes" in win.preview.overlay.text(), timeout=5_000)

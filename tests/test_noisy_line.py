@@ -82,7 +82,7 @@ def test_bit_error_rate_1e3_both_ways_prints_bit_exact(tmp_path, profile, seed):
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
     assert dev.emulator.jobs_done[1]["stray"] == 0
     assert 3e-4 < dev.link.quality.bit_error_rate() < 3e-3      # it measured the line
-    lines = [e["pass_id"] for e in dev.emulator.events if e["event"] == "line"]
+    lines = [e["stroke"] for e in dev.emulator.events if e["event"] == "line"]
     assert len(lines) == len(set(lines))                       # no stroke printed twice
 
 

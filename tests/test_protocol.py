@@ -362,7 +362,7 @@ def test_block_crc_and_header_checks():
     blk = P.encode_block(5, 48, 0b101, words)
     dec = P.BlockDecoder()
     (b,) = dec.feed(blk)
-    assert (b.pass_id, b.first_fire, b.head_mask, b.fires) == (5, 48, 0b101, 3)
+    assert (b.stroke, b.first_fire, b.head_mask, b.fires) == (5, 48, 0b101, 3)
     assert np.array_equal(b.words, words)
     bad = bytearray(blk)
     bad[30] ^= 0x40

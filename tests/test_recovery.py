@@ -1,5 +1,5 @@
 """The driver finishes jobs through line noise and lost links with every dot in place:
-no pass printed twice, none missing (issue 5)."""
+no stroke printed twice, none missing (issue 5)."""
 
 import numpy as np
 import pytest
@@ -33,7 +33,7 @@ def test_data_link_dropped_mid_job_resumes_bit_exact(tmp_path, profile, after, s
     assert rep.recoveries >= 1
     assert np.array_equal(media, planes)
     lines = [e for e in emu.events if e["event"] == "line"]
-    assert len({e["pass_id"] for e in lines}) == len(lines)      # no pass run twice
+    assert len({e["stroke"] for e in lines}) == len(lines)       # no stroke run twice
 
 
 @pytest.mark.parametrize("faults", [
@@ -49,9 +49,12 @@ def test_serial_noise_prints_bit_exact(tmp_path, profile, faults):
     assert emu.jobs_done[1]["stray"] == 0
 
 
-def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile):
-    """A host that died after pass 3 (the printer kept its state) resumes at pass 4: the
-    media equals an uninterrupted print (the server's crash recovery builds on this)."""
+@pytest.mark.parametrize("key", ["next_stroke", "next_pass"])
+def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile, key):
+    """A host that died after stroke 3 (the printer kept its state) resumes at stroke 4: the
+    media equals an uninterrupted print (the server's crash recovery builds on this).  A
+    checkpoint saved by an older version, which named the next stroke `next_pass`, resumes
+    the same way."""
     from wideprint.driver.job import JobCancelled
     planes = random_planes(900, 400, seed=41)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
@@ -61,17 +64,24 @@ def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile
     def on_event(kind, **kw):
         if kind == "checkpoint":
             checkpoints.append(kw["checkpoint"])
-            if kw["checkpoint"].get("next_pass") == 4:
-                first.control.cancel()           # the host "dies" between passes
+            if kw["checkpoint"].get("next_stroke") == 4:
+                first.control.cancel()           # the host "dies" between strokes
     first = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), on_event=on_event)
     with pytest.raises(JobCancelled):
         first.run()
     cp = checkpoints[-1]
-    assert cp["next_pass"] == 4
-    again = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), resume=cp)
+    assert cp["next_stroke"] == 4
+    if key == "next_pass":                       # as the previous version saved it
+        cp = {("next_pass" if k == "next_stroke" else k): v for k, v in cp.items()}
+        assert "next_stroke" not in cp and cp["next_pass"] == 4
+    started = []
+    again = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=2), profile), resume=cp,
+                     on_event=lambda kind, **kw: kind == "stroke" and started.append(kw["index"]))
     rep = again.run()
     dev.emulator.close()
     assert rep.state == "done"
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
-    lines = [e["pass_id"] for e in dev.emulator.events if e["event"] == "line"]
-    assert len(lines) == len(set(lines))                       # no pass printed twice
+    lines = [e["stroke"] for e in dev.emulator.events if e["event"] == "line"]
+    assert len(lines) == len(set(lines))                       # no stroke printed twice
+    assert started[0] == 4 and started == sorted(started)     # from stroke 4 on, no earlier one
+    assert rep.strokes_printed == rep.strokes_total

@@ -1,6 +1,6 @@
 """The fast paths give the same bits as the reference ones: the fused ordered screen
 (rip/screen.py) against Separator + Halftoner + pack_dots, and the block packer
-against the general pass packer."""
+against the general stroke packer."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ import pytest
 from wideprint.rip.color import Separator
 from wideprint.rip.halftone import Halftoner
 from wideprint.rip.screen import OrderedScreen, _drops4
-from wideprint.rip.swath import PassPlanner, pack_dots, unpack_dots
+from wideprint.rip.swath import StrokePlanner, pack_dots, unpack_dots
 
 from numba import njit
 
@@ -115,7 +115,7 @@ def plan_both(profile, dots, passes=1, mask="checker", bidir=False, band=64):
     height, width = dots.shape[:2]
 
     def plan(block):
-        planner = PassPlanner(profile, width, height, 300, passes, bidir, mask)
+        planner = StrokePlanner(profile, width, height, 300, passes, bidir, mask)
         planner.block_pack = block
         out = []
         for a in range(0, height, band):
@@ -125,7 +125,7 @@ def plan_both(profile, dots, passes=1, mask="checker", bidir=False, band=64):
     return plan(True), plan(False)
 
 
-def assert_same_passes(fast, slow, dots):
+def assert_same_strokes(fast, slow, dots):
     assert len(fast) == len(slow) > 1
     for f, s in zip(fast, slow):
         assert (f.index, f.direction, f.top_row, f.first_column) == \
@@ -140,8 +140,8 @@ def assert_same_passes(fast, slow, dots):
 def test_block_packer_equals_general_packer(profile, width, density):
     rng = np.random.default_rng(width)
     dots = (rng.random((700, width, 4)) < density).astype(np.uint8)
-    dots[100:180] = 0                              # blank rows: skipped passes
-    assert_same_passes(*plan_both(profile, dots), dots)
+    dots[100:180] = 0                              # blank rows: skipped strokes
+    assert_same_strokes(*plan_both(profile, dots), dots)
 
 
 @pytest.mark.parametrize("passes", [2, 3, 4, 6, 8])
@@ -149,7 +149,7 @@ def test_block_packer_equals_general_packer(profile, width, density):
 def test_block_packer_equals_general_packer_multipass(profile, passes, mask):
     rng = np.random.default_rng(passes)
     dots = (rng.random((500, 259, 4)) < 0.4).astype(np.uint8)
-    assert_same_passes(*plan_both(profile, dots, passes, mask, bidir=passes % 2 == 0, band=37),
+    assert_same_strokes(*plan_both(profile, dots, passes, mask, bidir=passes % 2 == 0, band=37),
                        dots)
 
 
@@ -158,4 +158,4 @@ def test_block_packer_with_dead_nozzles(tmp_path):
     prof = variant_profile(tmp_path, dead=[("M1", 57), ("K2", 3), ("C1", 10), ("C2", 10)])
     dots = (np.random.default_rng(9).random((400, 130, 4)) < 0.5).astype(np.uint8)
     for passes, mask in ((2, "checker"), (3, "feather"), (4, "random")):
-        assert_same_passes(*plan_both(prof, dots, passes, mask), dots)
+        assert_same_strokes(*plan_both(prof, dots, passes, mask), dots)

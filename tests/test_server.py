@@ -10,6 +10,7 @@ import http.client
 import io
 import json
 import os
+import re
 import select
 import signal
 import sqlite3
@@ -89,10 +90,10 @@ def db_job(state, job_id):
 
 
 def mid_line(cur):
-    """The status shows a pass being printed: started, some columns fired, not finished."""
-    if not cur or cur.get("pass_index") is None or "telemetry" not in cur:
+    """The status shows a stroke being printed: started, some columns fired, not finished."""
+    if not cur or cur.get("stroke_index") is None or "telemetry" not in cur:
         return None
-    if cur["pass_index"] == cur["passes_printed"] and cur["telemetry"]["fires_done"] > 0:
+    if cur["stroke_index"] == cur["strokes_printed"] and cur["telemetry"]["fires_done"] > 0:
         return cur
     return None
 
@@ -102,7 +103,7 @@ def lines_printed(event_log):
     for line in open(event_log):
         e = json.loads(line)
         if e.get("event") == "line":
-            ids.append(e["pass_id"])
+            ids.append(e["stroke"])
     return ids
 
 
@@ -119,24 +120,24 @@ def test_server_killed_mid_job_resumes_bit_exact(tmp_path, on_crash):
             job = client.submit(src, settings={"passes": 4, "bidir": True})["job"]
             jid = job["id"]
             os.unlink(src)                       # the spool has its own copy
-            j = wait_for(lambda: (lambda j: j if j["passes_done"] >= 2 else None)(client.job(jid)),
-                         what="two passes printed")
-            assert j["state"] == "printing" and j["passes_total"] > j["passes_done"] + 2
+            j = wait_for(lambda: (lambda j: j if j["strokes_done"] >= 2 else None)(client.job(jid)),
+                         what="two strokes printed")
+            assert j["state"] == "printing" and j["strokes_total"] > j["strokes_done"] + 2
             in_flight = None
             if on_crash == "resume":             # kill it in the middle of a line
                 in_flight = wait_for(lambda: mid_line(client.status()["current"]), 20,
-                                     poll=0.005, what="a pass half printed")
+                                     poll=0.005, what="a stroke half printed")
         finally:
             srv.send_signal(signal.SIGKILL)
             srv.wait(10)
         before = db_job(state, jid)
         assert before["state"] == "printing"
         cp = json.loads(before["checkpoint"])
-        assert cp["next_pass"] >= 2
+        assert cp["next_stroke"] >= 2
         if in_flight is not None:
-            # it died in that pass or soon after (the status reply and the kill are not
+            # it died in that stroke or soon after (the status reply and the kill are not
             # instantaneous; the printer may also finish a line from its FIFOs and ring)
-            assert cp["next_pass"] >= in_flight["pass_index"]
+            assert cp["next_stroke"] >= in_flight["stroke_index"]
 
         srv, client = start_server(state, spec, "--on-crash", on_crash)
         try:
@@ -160,7 +161,7 @@ def test_server_killed_mid_job_resumes_bit_exact(tmp_path, on_crash):
     assert [j["id"] for j in all_jobs] == [jid]                 # the job once, done
     assert np.array_equal(read_planes(tmp_path / f"media-{jid}.tif"), planes)
     ids = lines_printed(tmp_path / "emulator.jsonl")
-    assert len(ids) == len(set(ids)) == done["passes_total"]     # no pass twice, none missing
+    assert len(ids) == len(set(ids)) == done["strokes_total"]    # no stroke twice, none missing
     assert len(prints) == 1 and prints[0]["resumed"] == 1 and prints[0]["outcome"] == "done"
     assert [prints[0][f"drops_{c}"] for c in "cmyk"] == planes.reshape(-1, 4).sum(0).tolist()
 
@@ -172,7 +173,7 @@ def srv(tmp_path_factory):
     root = tmp_path_factory.mktemp("server")
     cfg = ServerConfig(device="emulator", state_dir=root / "state", media_dir=root / "media",
                        hot_folder_root=root / "hot", port=0, scan_interval=0.2,
-                       max_file_bytes=2_000_000)
+                       settle_s=1.0, max_file_bytes=2_000_000)
     server = PrintServer(cfg)
     server.start()
     server.root = root
@@ -509,12 +510,12 @@ def test_accounting_csv_columns_and_values(srv, client, tmp_path):
     pl = srv.profile.drop_volume_pl
     for r in rows:
         assert r["file"] == "acct.tif" and r["outcome"] == "done" and r["preset"] == "banner"
-        assert (r["passes_mode"], r["bidir"], r["dither"]) == ("2", "1", "bayer")
+        assert (r["passes"], r["bidir"], r["dither"]) == ("2", "1", "bayer")
         assert [int(r[f"drops_{c}"]) for c in "cmyk"] == dots.tolist()
         for c, d in zip("cmyk", dots):
             assert float(r[f"ink_{c}_ml"]) == pytest.approx(d * pl * 1e-9, abs=1e-9)
         assert float(r["ink_total_ml"]) == pytest.approx(dots.sum() * pl * 1e-9, abs=1e-8)
-        assert r["passes_printed"] == r["passes_total"] and int(r["passes_total"]) > 1
+        assert r["strokes_printed"] == r["strokes_total"] and int(r["strokes_total"]) > 1
         assert (int(r["width_dots"]), int(r["height_rows"])) == (480, 300)
         k = srv.profile.k(300)
         area = 480 * k / srv.profile.counts_per_inch * 0.0254 * 300 * srv.profile.row_um * 1e-6
@@ -553,15 +554,15 @@ def test_cancel_a_printing_job_stops_it_and_the_queue_goes_on(srv, client, tmp_p
     small = write_cmyk_tiff(tmp_path / "next.tif", random_planes(20, 30, seed=20))
     job = client.submit(big, settings={"passes": 8})["job"]
     nxt = client.submit(small)["job"]
-    wait_for(lambda: client.job(job["id"])["passes_done"] >= 1, 30, poll=0.005,
-             what="the first pass")
+    wait_for(lambda: client.job(job["id"])["strokes_done"] >= 1, 30, poll=0.005,
+             what="the first stroke")
     assert client.action(job["id"], "cancel")["state"] == "cancelled"
     j = client.job(job["id"])
-    assert j["passes_done"] < j["passes_total"] and "cancelled" in j["message"]
+    assert j["strokes_done"] < j["strokes_total"] and "cancelled" in j["message"]
     assert client.wait(nxt["id"], 60)["state"] == "done"
     rows = client.report(job["id"])
     assert len(rows) == 1 and rows[0]["outcome"] == "cancelled"
-    assert 0 < rows[0]["passes_printed"] < rows[0]["passes_total"]
+    assert 0 < rows[0]["strokes_printed"] < rows[0]["strokes_total"]
     # the cancelled job keeps its spooled copy (it may be requeued); the done one does not
     assert os.path.isfile(db_job(srv.state_dir, job["id"])["spool_path"])
     assert db_job(srv.state_dir, nxt["id"])["spool_path"] is None
@@ -580,13 +581,13 @@ def test_requeue_a_cancelled_job_prints_it_again_bit_exact(srv, client, tmp_path
     job = client.submit(src, settings={"passes": 4}, priority=3)["job"]
     jid = job["id"]
     os.unlink(src)                                   # only the spool's copy is left
-    wait_for(lambda: client.job(jid)["passes_done"] >= 1, 30, poll=0.005, what="the first pass")
+    wait_for(lambda: client.job(jid)["strokes_done"] >= 1, 30, poll=0.005, what="the first stroke")
     with pytest.raises(ApiError) as e:               # not while it prints
         client.action(jid, "requeue")
     assert e.value.status == 409 and f"job {jid} is printing" in str(e.value)
     assert client.action(jid, "cancel")["state"] == "cancelled"
     first = client.job(jid)
-    assert 0 < first["passes_done"] < first["passes_total"]
+    assert 0 < first["strokes_done"] < first["strokes_total"]
 
     r = cli(srv, "requeue", str(jid))
     assert r.returncode == 0, r.stderr
@@ -595,14 +596,14 @@ def test_requeue_a_cancelled_job_prints_it_again_bit_exact(srv, client, tmp_path
     assert done["state"] == "done" and done["message"] == "", done
     assert (done["attempt"], done["copies_done"], done["priority"]) == (2, 1, 3)
     assert done["settings"] == {"passes": 4}
-    assert done["passes_done"] == done["passes_total"]
-    # a fresh print from the first pass, on a fresh placement: the media is the image
+    assert done["strokes_done"] == done["strokes_total"]
+    # a fresh print from the first stroke, on a fresh placement: the media is the image
     assert np.array_equal(read_planes(srv.root / "media" / f"job-{jid}.tif"), planes)
     # both attempts are in the accounting
     rows = client.report(jid)
     assert [(r["attempt"], r["outcome"]) for r in rows] == [(1, "cancelled"), (2, "done")]
-    assert 0 < rows[0]["passes_printed"] < rows[0]["passes_total"]
-    assert rows[1]["passes_printed"] == rows[1]["passes_total"] and rows[1]["resumed"] == 0
+    assert 0 < rows[0]["strokes_printed"] < rows[0]["strokes_total"]
+    assert rows[1]["strokes_printed"] == rows[1]["strokes_total"] and rows[1]["resumed"] == 0
     assert [rows[1][f"drops_{c}"] for c in "cmyk"] == planes.reshape(-1, 4).sum(0).tolist()
     text = client.report_csv(jid)
     assert [(r["attempt"], r["outcome"]) for r in csv.DictReader(io.StringIO(text))] == \
@@ -620,7 +621,7 @@ def test_requeue_a_job_failed_by_a_printer_fault(srv, client, tmp_path):
     src = write_cmyk_tiff(tmp_path / "roll.tif", planes)
     job = client.submit(src, settings={"passes": 4})["job"]
     jid = job["id"]
-    wait_for(lambda: client.job(jid)["passes_done"] >= 1, 30, poll=0.005, what="the first pass")
+    wait_for(lambda: client.job(jid)["strokes_done"] >= 1, 30, poll=0.005, what="the first stroke")
     emu = srv.worker.dev.emulator
     emu.paper_left_steps = 1                         # the roll ends at the next feed
     failed = client.wait(jid, 60)
@@ -630,7 +631,7 @@ def test_requeue_a_job_failed_by_a_printer_fault(srv, client, tmp_path):
         emu.paper_left_steps = None                  # a new roll...
         emu.clear_fault()                            # ...and the fault cleared on the panel
         job = client.action(jid, "requeue")
-        assert (job["state"], job["attempt"], job["message"], job["passes_done"]) == \
+        assert (job["state"], job["attempt"], job["message"], job["strokes_done"]) == \
             ("queued", 2, "", 0)
         time.sleep(0.3)
         assert client.job(jid)["state"] == "queued"  # the queue stays paused until resumed
@@ -719,12 +720,21 @@ def test_spool_copies_of_ended_jobs_expire(tmp_path):
         s.stop(timeout=5)
 
 
+def schema_2() -> str:
+    """The schema before strokes had their word: the stroke counts were named passes_*."""
+    from wideprint.app.server.spool import RENAMED_COLUMNS, SCHEMA
+    old = SCHEMA
+    for _, before, now in RENAMED_COLUMNS:
+        old = re.sub(rf"\b{now}\b", before, old)
+    assert not re.search(r"\bstrokes_", old)
+    return old
+
+
 def test_schema_1_database_gets_the_attempt_columns(tmp_path):
-    from wideprint.app.server.spool import SCHEMA, Spool
+    from wideprint.app.server.spool import Spool
     state = tmp_path / "state"
     state.mkdir()
-    import re
-    old = re.sub(r"\n\s*attempt[^\n]*", "", SCHEMA)               # schema 1: no attempt columns
+    old = re.sub(r"\n\s*attempt[^\n]*", "", schema_2())           # schema 1: no attempt columns
     old = re.sub(r",(\s*(--[^\n]*)?\n\);)", r"\1", old)
     assert "attempt" not in old
     db = sqlite3.connect(state / "wideprint.db")
@@ -735,8 +745,55 @@ def test_schema_1_database_gets_the_attempt_columns(tmp_path):
     sp = Spool(state)
     assert sp.get(1)["attempt"] == 1
     assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
-    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "2"
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
     sp.close()
+
+
+def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
+    """A database of the previous version (passes_total, passes_done, passes_printed, and
+    checkpoints naming the next stroke `next_pass`) opens with every job and print kept,
+    its columns renamed to strokes; an interrupted job still resumes where it stopped."""
+    from wideprint.app.server.accounting import prints_csv
+    from wideprint.app.server.spool import Spool
+    state = tmp_path / "state"
+    state.mkdir()
+    db = sqlite3.connect(state / "wideprint.db")
+    cp = {"x0": 7680, "paper0": 0, "next_pass": 5, "epoch": 1, "copy": 1}
+    db.executescript(schema_2() + "INSERT INTO meta VALUES ('schema', '2');"
+                     "INSERT INTO meta VALUES ('printer_epoch', '1');")
+    db.execute("INSERT INTO jobs (name, source, size, sha256, settings, state, submitted, "
+               "passes_total, passes_done, checkpoint) VALUES "
+               "('a.tif', 'api', 1, 'x', '{\"passes\": 2}', 'printing', 0, 9, 5, ?)",
+               (json.dumps(cp),))
+    db.execute("INSERT INTO prints (job_id, copy, file, source, settings, started, ended, "
+               "duration_s, passes_total, passes_printed, drops_c, drops_m, drops_y, drops_k, "
+               "ink_c_ml, ink_m_ml, ink_y_ml, ink_k_ml, width_dots, height_rows, area_m2, "
+               "outcome) VALUES (1, 1, 'a.tif', 'api', '{\"passes\": 2}', 0, 1, 1, 9, 4, "
+               "1, 2, 3, 4, 0, 0, 0, 0, 10, 600, 0.01, 'cancelled')")
+    db.commit()
+    db.close()
+    sp = Spool(state)
+    try:
+        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
+        for table in ("jobs", "prints"):
+            cols = {r[1] for r in sp.db.execute(f"PRAGMA table_info({table})")}
+            assert not {c for c in cols if c.startswith("passes")}, cols
+        job = sp.get(1)
+        assert (job["name"], job["state"], job["strokes_total"], job["strokes_done"]) == \
+            ("a.tif", "printing", 9, 5)
+        assert job["checkpoint"]["next_stroke"] == 5 and "next_pass" not in job["checkpoint"]
+        assert job["settings"] == {"passes": 2}
+        (row,) = sp.prints(1)
+        assert (row["strokes_total"], row["strokes_printed"], row["outcome"]) == (9, 4, "cancelled")
+        line = dict(zip(*list(csv.reader(io.StringIO(prints_csv([row]))))))
+        assert (line["passes"], line["strokes_total"], line["strokes_printed"]) == ("2", "9", "4")
+        (rec,) = sp.recover("resume")
+        assert rec["message"] == "interrupted (server stopped); resuming at stroke 5"
+        claimed = sp.claim(1)                      # same epoch: it resumes from its checkpoint
+        assert claimed["checkpoint"]["next_stroke"] == 5 and claimed["strokes_done"] == 5
+    finally:
+        sp.close()
+    Spool(state).close()                           # opening a schema 3 database changes nothing
 
 
 # -- presets re-read without a restart --------------------------------------------------------------
@@ -750,8 +807,8 @@ def test_presets_reread_when_the_file_changes_and_a_broken_file_is_refused(tmp_p
     from wideprint.app.server import DEFAULT_PRESETS, PrintServer, ServerConfig
     state, hot = tmp_path / "state", tmp_path / "hot"
     server = PrintServer(ServerConfig(device="emulator", state_dir=state, port=0,
-                                      hot_folder_root=hot, scan_interval=0.1, start_paused=True,
-                                      media_dir=tmp_path / "media"))
+                                      hot_folder_root=hot, scan_interval=0.1, settle_s=0.5,
+                                      start_paused=True, media_dir=tmp_path / "media"))
     server.start()
     c = Client(state)
     try:

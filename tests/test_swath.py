@@ -1,4 +1,4 @@
-"""The pass planner: every halftone dot is fired exactly once, by a live nozzle, at the
+"""The stroke planner: every halftone dot is fired exactly once, by a live nozzle, at the
 place the geometry says (property-based over images, modes and profiles)."""
 
 from pathlib import Path
@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from wideprint.driver import protocol as P
 from wideprint.rip.profile import DEFAULT_PROFILE, ProfileError, load_profile
-from wideprint.rip.swath import PASS_COUNTS, PassPlanner
+from wideprint.rip.swath import PASS_COUNTS, StrokePlanner
 
 
 def variant_profile(tmp_dir: Path, dead=(), offsets=None, bidir=None, name="p"):
@@ -36,25 +36,25 @@ def variant_profile(tmp_dir: Path, dead=(), offsets=None, bidir=None, name="p"):
     return load_profile(path)
 
 
-def replay(profile, planner, passes, height, width):
+def replay(profile, planner, strokes, height, width):
     """Map every fired nozzle back to the image dot it lands on."""
     got = np.zeros((height, width, 4), np.int32)
     k = planner.k
     hpc = profile.heads_per_color
-    for pd in passes:
+    for sd in strokes:
         for h in profile.heads:
-            bits = P.words_to_nozzles(pd.words[h.index])          # (fires, 128)
+            bits = P.words_to_nozzles(sd.words[h.index])          # (fires, 128)
             assert not bits[:, 0].any() and not bits[:, 127].any()
             for n in range(profile.nozzles):
                 if (h.index, n) in profile.dead_nozzles:
                     assert not bits[:, n].any(), f"dead nozzle {h.name}:{n} fired"
             fi, nz = np.nonzero(bits)
-            if pd.direction == 0:
-                t = pd.first_column + fi
+            if sd.direction == 0:
+                t = sd.first_column + fi
             else:
-                t = pd.first_column + pd.fires - 1 - fi - profile.bidir_offset_columns.get(planner.dpi, 0)
+                t = sd.first_column + sd.fires - 1 - fi - profile.bidir_offset_columns.get(planner.dpi, 0)
             x = t + h.x_counts // k
-            r = pd.top_row + h.y_rows + hpc * nz
+            r = sd.top_row + h.y_rows + hpc * nz
             assert (x >= 0).all() and (x < width).all() and (r >= 0).all() and (r < height).all()
             np.add.at(got, (r, x, h.channel), 1)
     return got
@@ -87,7 +87,7 @@ def test_every_dot_fired_once_by_a_live_nozzle(tmp_path_factory, job):
     tmp = tmp_path_factory.mktemp("prof")
     try:
         profile = variant_profile(tmp, dead, offsets, bidir={150: bidir_off, 300: bidir_off, 600: bidir_off})
-        planner = PassPlanner(profile, w, h, dpi, passes, bidir, mask)
+        planner = StrokePlanner(profile, w, h, dpi, passes, bidir, mask)
     except ProfileError as exc:
         # only acceptable refusal: dead nozzles that leave a row with no live nozzle
         assert "unprintable" in str(exc)
@@ -110,19 +110,19 @@ def test_every_dot_fired_once_by_a_live_nozzle(tmp_path_factory, job):
 def test_dead_nozzle_with_one_pass_is_refused_with_a_clear_message(tmp_path):
     profile = variant_profile(tmp_path, dead=[("M1", 57)])
     with pytest.raises(ProfileError, match="M1:57.*colour M.*1 pass"):
-        PassPlanner(profile, 10, 10, 300, 1)
+        StrokePlanner(profile, 10, 10, 300, 1)
 
 
-def test_pass_geometry_numbers(profile):
-    pl = PassPlanner(profile, 100, 1000, 300, 4)
+def test_stroke_geometry_numbers(profile):
+    pl = StrokePlanner(profile, 100, 1000, 300, 4)
     assert pl.advance == 63 and pl.s0 == 2
-    assert pl.total_passes == -(-1000 // 63) + 3
+    assert pl.total_strokes == -(-1000 // 63) + 3
     assert pl.y0_rows == 3 * 63 + 2
 
 
 def test_memory_window_is_bounded(profile):
-    """Feeding a tall image band by band keeps only the pass window."""
-    pl = PassPlanner(profile, 64, 20000, 300, 2)
+    """Feeding a tall image band by band keeps only the planner's window."""
+    pl = StrokePlanner(profile, 64, 20000, 300, 2)
     rng = np.random.default_rng(0)
     biggest = 0
     for y in range(0, 20000, 256):
@@ -133,15 +133,15 @@ def test_memory_window_is_bounded(profile):
 
 @pytest.mark.parametrize("mask", ["checker", "random", "feather"])
 def test_pass_masks_share_dots_between_passes(profile, mask):
-    """Every pass prints a share of a full field; feathering gives the nozzles at the ends
+    """Every stroke prints a share of a full field; feathering gives the nozzles at the ends
     of the run fewer dots than those in the middle."""
     n, h, w = 4, 1200, 256
-    pl = PassPlanner(profile, w, h, 300, n, mask=mask)
+    pl = StrokePlanner(profile, w, h, 300, n, mask=mask)
     full = np.ones((h, w, 4), np.uint8)
-    passes = pl.feed(full) + pl.finish()
+    strokes = pl.feed(full) + pl.finish()
     per_nozzle = np.zeros(profile.nozzles)
-    for pd in passes:
-        bits = P.words_to_nozzles(pd.words[0])
+    for sd in strokes:
+        bits = P.words_to_nozzles(sd.words[0])
         per_nozzle += bits.sum(axis=0)
     used = per_nozzle[2:126]
     mid, ends = used[len(used) // 2 - 10:len(used) // 2 + 10].mean(), np.r_[used[:8], used[-8:]].mean()

@@ -87,10 +87,10 @@ def test_head_bit_streams_equal_the_rip_words(tmp_path, profile, dpi, passes, bi
     planes = random_planes(400, 150, seed=passes)
     src = write_cmyk_tiff(tmp_path / "in.tif", planes)
     settings = RipSettings(placement=PX, dpi=dpi, passes=passes, bidir=bidir)
-    expected = {pd.index: pd.words for pd in RipJob(str(src), settings, profile).passes()}
+    expected = {sd.index: sd.words for sd in RipJob(str(src), settings, profile).strokes()}
     dev = open_device("emulator", profile, record_latched=True)
     PrintJob(dev, RipJob(str(src), settings, profile)).run()
     dev.emulator.close()
     assert sorted(dev.emulator.latched) == sorted(expected)
-    for p, words in expected.items():
-        assert np.array_equal(dev.emulator.latched_words(p), words), f"pass {p}"
+    for i, words in expected.items():
+        assert np.array_equal(dev.emulator.latched_words(i), words), f"stroke {i}"

@@ -22,6 +22,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    import os
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+            or os.environ.get("QT_QPA_PLATFORM")):
+        # Qt would abort (SIGABRT) with a long message about platform plugins
+        print("wideprint gui: no display (DISPLAY and WAYLAND_DISPLAY are unset); run it on a "
+              "desktop, under xvfb-run, or with QT_QPA_PLATFORM=offscreen", file=sys.stderr)
+        return 2
     try:
         from PySide6.QtWidgets import QApplication
     except ImportError as exc:  # pragma: no cover - depends on the installation

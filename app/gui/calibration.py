@@ -3,7 +3,7 @@ alignment.  The operator prints a pattern, picks the straight block (on the emul
 dialog shows the printed media and suggests it), and the chosen offsets are written to
 the user's copy of the printer profile with rip.profile.save_calibration.  After a nozzle
 check the operator marks the nozzles whose dash is missing as dead (or clears them after a
-head is replaced); they go into the profile's dead_nozzles, which the pass planner prints
+head is replaced); they go into the profile's dead_nozzles, which the stroke planner prints
 around (with two or more passes)."""
 
 from __future__ import annotations

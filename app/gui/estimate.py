@@ -1,6 +1,6 @@
-"""Estimates shown before printing (docs/gui.md, "Estimates"): time, area, ink, passes.
+"""Estimates shown before printing (docs/gui.md, "Estimates"): time, area, ink, strokes.
 
-Time, per pass (every number from the printer profile):
+Time, per stroke (every number from the printer profile):
 
     L      = image width + head spread + 2 ramps                       (mm)
              head spread = max(x_counts) - min(x_counts); ramp = v²/2a + 2 columns
@@ -13,9 +13,9 @@ Time, per pass (every number from the printer profile):
     t_feed = n / f + f / α  (n ≥ f²/α)  or  2 √(n / α)   the paper advance of A rows
              n = A * row / step (feed steps), f = max steps/s, α = steps/s²
 
-    time = copies * passes * (t_line + t_ret + t_feed)
+    time = copies * strokes * (t_line + t_ret + t_feed)
 
-passes = RipJob(...).planner().total_passes (blank passes, which the driver skips,
+strokes = RipJob(...).planner().total_strokes (blank strokes, which the driver skips,
 are counted: the estimate is an upper bound for images with empty bands).
 
 Ink per colour (ml) = drops * profile.drop_volume_pl * 1e-9, with the drops counted in
@@ -37,10 +37,10 @@ class Estimate:
     height_rows: int = 0
     width_mm: float = 0.0
     height_mm: float = 0.0
-    passes: int = 0
+    strokes: int = 0                         # carriage strokes of one copy
     copies: int = 1
     time_s: float = 0.0                      # all copies
-    pass_s: float = 0.0
+    stroke_s: float = 0.0                    # one stroke
     area_m2: float = 0.0                     # one copy
     drops: list = field(default_factory=lambda: [0, 0, 0, 0])   # one copy
     ink_ml: list = field(default_factory=lambda: [0.0] * 4)     # all copies
@@ -58,8 +58,9 @@ def _trapezoid_s(distance: float, v: float, a: float) -> float:
     return 2.0 * math.sqrt(distance / a)
 
 
-def pass_time_s(profile: Profile, width_dots: int, dpi: int, passes: int, bidir: bool) -> dict:
-    """The parts of one pass's time (seconds) and the lengths they come from (mm)."""
+def stroke_time_s(profile: Profile, width_dots: int, dpi: int, passes: int, bidir: bool) -> dict:
+    """The parts of one stroke's time (seconds) and the lengths they come from (mm); `passes`
+    is the weave's (it sets the paper advance between strokes)."""
     cpi = profile.counts_per_inch
     k = profile.k(dpi)
     v = profile.speed_counts_s(dpi) / cpi * 25.4                     # mm/s
@@ -83,20 +84,21 @@ def pass_time_s(profile: Profile, width_dots: int, dpi: int, passes: int, bidir:
 
 
 def estimate(profile: Profile, width_dots: int, height_rows: int, dpi: int, passes_n: int,
-             bidir: bool, total_passes: int, copies: int = 1,
+             bidir: bool, total_strokes: int, copies: int = 1,
              preview_drops=None, preview_dots: int = 0) -> Estimate:
-    """An Estimate from the job's size in device dots and the planner's pass count.
+    """An Estimate from the job's size in device dots, the weave's pass count (passes_n) and
+    the planner's stroke count.
     preview_drops: drops per colour counted in a halftone of preview_dots dots."""
     cpi = profile.counts_per_inch
     k = profile.k(dpi)
-    e = Estimate(width_dots=int(width_dots), height_rows=int(height_rows), passes=int(total_passes),
+    e = Estimate(width_dots=int(width_dots), height_rows=int(height_rows), strokes=int(total_strokes),
                  copies=int(copies))
     e.width_mm = width_dots * k / cpi * 25.4
     e.height_mm = height_rows * profile.row_um / 1000.0
     e.area_m2 = e.width_mm * e.height_mm * 1e-6
-    parts = pass_time_s(profile, width_dots, dpi, passes_n, bidir)
-    e.pass_s = parts["total"]
-    e.time_s = copies * total_passes * e.pass_s
+    parts = stroke_time_s(profile, width_dots, dpi, passes_n, bidir)
+    e.stroke_s = parts["total"]
+    e.time_s = copies * total_strokes * e.stroke_s
     if preview_drops is not None and preview_dots > 0:
         ratio = (width_dots * height_rows) / preview_dots
         e.drops = [int(round(float(d) * ratio)) for d in preview_drops]

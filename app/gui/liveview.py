@@ -1,8 +1,8 @@
-"""The live media view: what has landed on the emulated paper, filling in pass by pass.
+"""The live media view: what has landed on the emulated paper, filling in stroke by stroke.
 
 The printer thread paints media rows into a LiveSink canvas (workers.py) before they
 leave the emulator's media window; a 200 ms QTimer on the UI thread also asks for the
-rows of the pass in progress (Media.snapshot) and repaints from the canvas.
+rows of the stroke in progress (Media.snapshot) and repaints from the canvas.
 """
 
 from __future__ import annotations

@@ -87,7 +87,7 @@ class MainWindow(QMainWindow):
         self.worker.deviceChanged.connect(self._device_changed)
         self.worker.jobStarted.connect(self._job_started)
         self.worker.jobState.connect(self._job_state)
-        self.worker.jobPass.connect(self._job_pass)
+        self.worker.jobStroke.connect(self._job_stroke)
         self.worker.jobFinished.connect(self._job_finished)
         self.printer_thread.start()
 
@@ -142,7 +142,7 @@ class MainWindow(QMainWindow):
         self._action("print", "Print", self.print_queue, "Ctrl+P", S.SP_MediaPlay,
                      "Print every job in the queue that has not been printed")
         self._action("pause", "Pause", self.pause_job, None, S.SP_MediaPause,
-                     "Pause after the pass that is printing")
+                     "Pause after the stroke that is printing")
         self._action("resume", "Resume", self.resume_job, None, S.SP_MediaSeekForward)
         self._action("cancel", "Cancel", self.cancel_job, None, S.SP_MediaStop,
                      "Stop the job now (the line stops, the carriage parks) and stop the queue")
@@ -667,7 +667,7 @@ class MainWindow(QMainWindow):
         if self.current:
             self.current[1].control.pause()
             self.paused = True
-            log.info("pause requested: the job pauses after the pass that is printing")
+            log.info("pause requested: the job pauses after the stroke that is printing")
             self._update_actions()
 
     def resume_job(self) -> None:
@@ -715,8 +715,8 @@ class MainWindow(QMainWindow):
             w_mm = info["width"] * k / cpi * 25.4
             h_mm = info["height"] * info["row_um"] / 1000
             title = f"{name}" + (f", copy {info['copy'] + 1} of {copies}" if copies > 1 else "") + \
-                f" — {w_mm:,.0f} × {h_mm:,.0f} mm, {info.get('passes', '?')} pass" + \
-                ("" if info.get("passes") == 1 else "es")
+                f" — {w_mm:,.0f} × {h_mm:,.0f} mm, {info.get('strokes', '?')} stroke" + \
+                ("" if info.get("strokes") == 1 else "s")
             self.live.start(info["sink"], w_mm, h_mm, title)
             if item_id > 0 and self.tabs.currentIndex() == 0:
                 self.tabs.setCurrentWidget(self.live)
@@ -738,7 +738,7 @@ class MainWindow(QMainWindow):
         self.model.changed(item_id)
         self._update_actions()
 
-    def _job_pass(self, item_id: int, copy: int, copies: int, index: int, total: int) -> None:
+    def _job_stroke(self, item_id: int, copy: int, copies: int, index: int, total: int) -> None:
         it = self.model.item(item_id)
         if it is not None:
             it.progress = (copy + index / max(1, total)) / max(1, copies)
@@ -797,10 +797,10 @@ class MainWindow(QMainWindow):
             return
         t = job.telemetry
         self.device.show_telemetry(t)
-        passes = f"pass {t.pass_index + 1 if t.pass_index is not None else '–'} of {t.passes_total}, " \
-                 f"{t.passes_printed} printed"
+        strokes = f"stroke {t.stroke_index + 1 if t.stroke_index is not None else '–'} of " \
+                  f"{t.strokes_total}, {t.strokes_printed} printed"
         self.worker.capture_live()
-        self.live.refresh(passes)
+        self.live.refresh(strokes)
 
     def _idle_refresh(self) -> None:
         if self.connected and self.current is None and not self.worker.busy:

@@ -10,7 +10,7 @@ _RULES = [
      "no other nozzle can print in this many passes. Choose 2 or more passes (the other passes print "
      "those rows), or, if the head was cleaned or replaced, clear the dead nozzles in Test prints & "
      "calibration (nozzle check)."),
-    (r"FIFO underrun", "Print data reached the heads too late, so the pass stopped. The computer "
+    (r"FIFO underrun", "Print data reached the heads too late, so the stroke stopped. The computer "
      "or the data link could not keep up: close other programs, check the data cable, then print "
      "the job again."),
     (r"FIFO overflow", "The printer received more print data than announced (driver and firmware "

@@ -47,7 +47,7 @@ class QueueItem:
     settings: JobSettings
     id: int = field(default_factory=lambda: next(_ids))
     state: str = LOADING
-    detail: str = ""                  # driver state detail ("homing", "before pass 3")
+    detail: str = ""                  # driver state detail ("homing", "before stroke 3")
     message: str = ""                 # error / failure text, shown in the row
     progress: float = 0.0             # 0..1 over all copies
     estimate: Estimate | None = None

@@ -36,7 +36,7 @@ class PreviewData:
     width_mm: float
     height_mm: float
     dpi: int
-    total_passes: int
+    total_strokes: int
     dots: np.ndarray                      # (ph, pw, 4) uint8 0/1: the preview halftone
     estimate: Estimate
     source_desc: str = ""                 # "3000 x 2000 px CMYK 8-bit TIFF"
@@ -139,7 +139,7 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
     try:
         W, H = job.width, job.height
         planner = job.planner()
-        total = planner.total_passes
+        total = planner.total_strokes
         k = profile.k(rs.dpi)
         width_mm = W * k / profile.counts_per_inch * 25.4
         height_mm = H * profile.row_um / 1000.0
@@ -173,7 +173,7 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
         # no resampling: the halftoner saw exactly the placed image the RIP will see
         exact = (pw, ph) == (W, H) and not resampled
         return PreviewData(path=path, width_dots=W, height_rows=H, width_mm=width_mm,
-                           height_mm=height_mm, dpi=rs.dpi, total_passes=total, dots=dots,
+                           height_mm=height_mm, dpi=rs.dpi, total_strokes=total, dots=dots,
                            estimate=est, source_desc=desc, exact=exact,
                            seconds=time.monotonic() - t0, warnings=warnings)
     finally:

@@ -328,7 +328,7 @@ class SettingsPanel(QWidget):
 
 
 class EstimateBox(QGroupBox):
-    """Time, area, passes and ink of the selected job (docs/gui.md, "Estimates")."""
+    """Time, area, strokes and ink of the selected job (docs/gui.md, "Estimates")."""
 
     def __init__(self, parent=None):
         super().__init__("Estimate", parent)
@@ -336,7 +336,7 @@ class EstimateBox(QGroupBox):
         g.setColumnStretch(1, 1)
         g.setColumnStretch(3, 1)
         self.labels = {}
-        rows = [("size", "Size"), ("dots", "Dots"), ("area", "Area"), ("passes", "Passes"),
+        rows = [("size", "Size"), ("dots", "Dots"), ("area", "Area"), ("strokes", "Strokes"),
                 ("time", "Time"), ("ink", "Ink total")]
         for i, (k, text) in enumerate(rows):
             g.addWidget(QLabel(text + ":"), i, 0)
@@ -372,7 +372,7 @@ class EstimateBox(QGroupBox):
         self.labels["size"].setText(f"{e.width_mm:,.1f} × {e.height_mm:,.1f} mm")
         self.labels["dots"].setText(f"{e.width_dots:,} × {e.height_rows:,}")
         self.labels["area"].setText(f"{e.area_m2:.3f} m²" + (f" (× {e.copies})" if e.copies > 1 else ""))
-        self.labels["passes"].setText(f"{e.passes}  ({e.pass_s:.1f} s each)")
+        self.labels["strokes"].setText(f"{e.strokes}  ({e.stroke_s:.1f} s each)")
         self.labels["time"].setText(fmt_duration(e.time_s) + copies)
         self.labels["ink"].setText(f"{fmt_ml(e.total_ink_ml)} ml" + copies)
         for name, ml in zip("CMYK", e.ink_ml):

@@ -71,7 +71,7 @@ class Task(QRunnable):
 
 class LiveSink:
     """The live view's canvas: rendered media rows, every `step`-th row and column.
-    Written by the printer thread (and by the UI's mid-pass polls), read by the UI."""
+    Written by the printer thread (and by the UI's mid-stroke polls), read by the UI."""
 
     def __init__(self, width: int, height: int, max_px: int = LIVE_MAX_PX):
         self.width, self.height = width, height
@@ -229,7 +229,7 @@ class PrinterWorker(QObject):
     deviceChanged = Signal(object)           # connected, spec, paper_mm, info, temps, fault ...
     jobStarted = Signal(int, object)         # item id, {copy, copies, width, height, dpi, media, sink}
     jobState = Signal(int, str, str)        # item id, state, detail
-    jobPass = Signal(int, int, int, int, int)   # item id, copy, copies, pass index, total
+    jobStroke = Signal(int, int, int, int, int)   # item id, copy, copies, stroke index, total
     jobFinished = Signal(int, object)        # item id, {state, message, media, reports}
 
     def __init__(self, pace: Pace):
@@ -391,7 +391,7 @@ class PrinterWorker(QObject):
 
     # -- printing -----------------------------------------------------------------------
     def capture_live(self) -> None:
-        """Called from the UI thread: bring the live canvas up to the running pass, if the
+        """Called from the UI thread: bring the live canvas up to the running stroke, if the
         emulator is free this instant (never waits)."""
         dev = self.dev
         if dev is None or dev.emulator is None or self.live is None:
@@ -463,7 +463,7 @@ class PrinterWorker(QObject):
             except (ImageError, ValueError, OSError) as exc:
                 return dict(state="failed", message=str(exc), reports=reports, media=media)
             try:
-                total_passes = rip.planner().total_passes
+                total_strokes = rip.planner().total_strokes
             except ValueError as exc:       # e.g. dead nozzles with 1 pass: refused, with why
                 rip.close()
                 return dict(state="failed", message=str(exc), reports=reports, media=media)
@@ -488,8 +488,8 @@ class PrinterWorker(QObject):
             def on_event(kind, _id=t.item_id, _copy=copy, **kw):
                 if kind == "state":
                     self.jobState.emit(_id, kw.get("state", ""), kw.get("detail", ""))
-                elif kind == "pass":
-                    self.jobPass.emit(_id, _copy, max(1, t.copies), int(kw["index"]), int(kw["total"]))
+                elif kind == "stroke":
+                    self.jobStroke.emit(_id, _copy, max(1, t.copies), int(kw["index"]), int(kw["total"]))
                 elif kind == "recover":
                     log.warning("%s: %s (reconnecting, attempt %s)", kw.get("what"), kw.get("error"),
                                 kw.get("attempt"))
@@ -500,7 +500,7 @@ class PrinterWorker(QObject):
             self.jobStarted.emit(t.item_id, dict(copy=copy, copies=max(1, t.copies), width=rip.width,
                                                  height=rip.height, dpi=rip.settings.dpi,
                                                  row_um=profile.row_um, media=mpath, sink=live,
-                                                 passes=total_passes))
+                                                 strokes=total_strokes))
             try:
                 rep = job.run()
                 reports.append(rep.as_dict())

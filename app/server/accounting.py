@@ -14,8 +14,8 @@ log = logging.getLogger("wideprint.server")
 
 
 CSV_COLUMNS = ["print_id", "job_id", "copy", "file", "source", "preset", "settings", "dpi",
-               "passes_mode", "bidir", "dither", "started", "ended", "duration_s",
-               "passes_total", "passes_printed", "width_dots", "height_rows", "area_m2",
+               "passes", "bidir", "dither", "started", "ended", "duration_s",
+               "strokes_total", "strokes_printed", "width_dots", "height_rows", "area_m2",
                "drops_c", "drops_m", "drops_y", "drops_k",
                "ink_c_ml", "ink_m_ml", "ink_y_ml", "ink_k_ml", "ink_total_ml",
                "outcome", "message", "resumed", "recoveries", "retries", "attempt"]
@@ -36,7 +36,7 @@ def prints_csv(rows: list[dict]) -> str:
                     r["settings"], s.get("dpi", 300), s.get("passes", 1),
                     int(bool(s.get("bidir", False))), s.get("dither", "fs"),
                     _iso(r["started"]), _iso(r["ended"]), f"{r['duration_s']:.3f}",
-                    r["passes_total"], r["passes_printed"], r["width_dots"], r["height_rows"],
+                    r["strokes_total"], r["strokes_printed"], r["width_dots"], r["height_rows"],
                     f"{r['area_m2']:.10f}", *(r[f"drops_{c}"] for c in COLORS),
                     *(f"{v:.9f}" for v in ink), f"{sum(ink):.9f}",
                     r["outcome"], r["message"], r["resumed"], r["recoveries"], r["retries"],

@@ -26,6 +26,10 @@ IGNORED_SUFFIXES = (".part", ".tmp", ".temp", ".crdownload", ".partial", ".downl
 MAX_COPIES = 100
 PRIORITY_RANGE = (-100, 100)
 CHUNK = 1 << 20
+SQLITE_MAX_INT = 2 ** 63 - 1               # ids and numbers the API accepts (SQLite INTEGER)
+DEFAULT_SETTLE_S = 5.0                     # a hot-folder file unchanged this long is complete
+DEFAULT_API_TIMEOUT_S = 30.0               # an API connection silent this long is closed
+DEFAULT_API_CONNECTIONS = 32               # API connections served at once; more get 503
 
 
 def default_state_dir() -> Path:
@@ -63,18 +67,17 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _unique(path: Path) -> Path:
-    if not path.exists() and not path.is_symlink():
-        return path
-    stem, suffix = path.name, ""
+def unique_names(name: str):
+    """NAME, then NAME-1, NAME-2, ... (before an image suffix: a-1.tif), for a name that
+    is taken already."""
+    yield name
+    stem, suffix = name, ""
     for s in IMAGE_SUFFIXES:
-        if path.name.lower().endswith(s):
-            stem, suffix = path.name[:-len(s)], path.name[-len(s):]
+        if name.lower().endswith(s):
+            stem, suffix = name[:-len(s)], name[-len(s):]
     i = 1
     while True:
-        cand = path.with_name(f"{stem}-{i}{suffix}")
-        if not cand.exists() and not cand.is_symlink():
-            return cand
+        yield f"{stem}-{i}{suffix}"
         i += 1
 
 
@@ -93,3 +96,6 @@ class ServerConfig:
     profile_path: str | None = None
     reconnect_backoff: tuple = (0.5, 30.0)
     keep_failed_s: float = 7 * 86400       # spool copies of failed/cancelled jobs (requeue)
+    settle_s: float = DEFAULT_SETTLE_S     # hot folders: unchanged this long (and no writer)
+    api_timeout_s: float = DEFAULT_API_TIMEOUT_S      # idle API connections are closed
+    api_max_connections: int = DEFAULT_API_CONNECTIONS  # served at once; more: 503

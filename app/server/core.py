@@ -5,8 +5,8 @@ One process owns the printer (one Device, re-opened after link errors) and its q
 
 - the API: HTTP/JSON on 127.0.0.1 with a bearer token (`ApiHandler`);
 - the worker: prints queued jobs one at a time in queue order, persisting the job's
-  checkpoint after every pass, so a server killed mid-job resumes it at its first
-  unfinished pass (or holds it, `--on-crash hold`);
+  checkpoint after every stroke, so a server killed mid-job resumes it at its first
+  unfinished stroke (or holds it, `--on-crash hold`);
 - the hot-folder scanner: one folder per preset; a completely written file becomes a job,
   and moves to done/ or failed/ (with NAME.reason.txt) when the job ends.
 
@@ -34,6 +34,7 @@ from .api import ApiHandler, _HTTPServer
 from .config import CHUNK, IMAGE_SUFFIXES, SERVER_FILE, ServerConfig, _fsync_dir, ensure_token
 from .hotfolders import HotFolders
 from .presets import Presets
+from .sdnotify import notify
 from .spool import Spool
 from .validate import Invalid
 from .worker import Worker
@@ -68,7 +69,7 @@ class PrintServer:
         if config.host not in ("127.0.0.1", "localhost", "::1"):
             log.warning("the API listens on %s, beyond this machine: anyone with the token "
                         "can print", config.host)
-        self.http = _HTTPServer((config.host, config.port), handler)
+        self.http = _HTTPServer((config.host, config.port), handler, config.api_max_connections)
         self.port = self.http.server_address[1]
         self.url = f"http://{config.host}:{self.port}"
         self._http_thread = threading.Thread(target=self.http.serve_forever, name="wideprint-api",
@@ -138,12 +139,33 @@ class PrintServer:
         self.worker.interrupt(timeout)
         self.http.shutdown()
         self.http.server_close()
+        if self.hot:
+            self.hot.close()
         try:
             (self.state_dir / SERVER_FILE).unlink()
         except OSError:
             pass
 
     # -- intake -------------------------------------------------------------------------------
+    def queue_file(self, src, name: str, size: int, *, exact: bool = False, check=None,
+                   **fields) -> tuple[dict, bool]:
+        """Copy a file into the spool and queue it as a job: (job, created).  The copy is
+        owned by the job, or deleted before this returns or raises — whatever fails (the
+        copy, `check()` after it, the database), no spool file is left without a job.
+        A duplicate key returns the job already queued, and its copy is deleted too."""
+        spool_path, n, digest = self.spool_copy(src, name, size, exact=exact)
+        try:
+            if check is not None:
+                check()
+            job, created = self.spool.add_job(name=name, spool_path=spool_path, size=n,
+                                              sha256=digest, **fields)
+        except BaseException:
+            _unlink(spool_path)
+            raise
+        if not created:
+            _unlink(spool_path)
+        return job, created
+
     def spool_copy(self, src, name: str, size: int, exact: bool = False) -> tuple[str, int, str]:
         """Copy a submitted file into the spool (fsync'd): returns (path, size, sha256).
         exact: read exactly `size` bytes (an upload); otherwise to EOF, refusing more than
@@ -187,7 +209,7 @@ class PrintServer:
     def public(self, job: dict, positions: dict | None = None) -> dict:
         d = {k: v for k, v in job.items() if k not in ("spool_path", "checkpoint", "key")}
         cp = job.get("checkpoint")
-        d["next_pass"] = cp.get("next_pass") if cp else None
+        d["next_stroke"] = cp.get("next_stroke") if cp else None
         if positions is not None:
             d["position"] = positions.get(job["id"])
         return d
@@ -240,18 +262,13 @@ class PrintServer:
         return job
 
     def hot_done(self, job: dict, state: str, message: str) -> None:
-        """A hot-folder job ended: its original goes to done/ or failed/ (with reason)."""
+        """A hot-folder job ended: its original goes to done/ or failed/ (with reason),
+        reached from the hot-folder root's descriptor only (HotFolders.finish)."""
         hot = job.get("hot_path")
         if not hot or not self.hot:
             return
-        src = Path(hot)
-        if not src.exists():
-            return
-        with self.hot.lock:
-            if state == "done":
-                HotFolders.move(src, src.parent / "done")
-            else:
-                HotFolders.move(src, src.parent / "failed", f"job {job['id']} {state}: {message}")
+        self.hot.finish(hot, state, None if state == "done"
+                        else f"job {job['id']} {state}: {message}")
 
     def status(self) -> dict:
         w = self.worker
@@ -275,6 +292,15 @@ class PrintServer:
         return prints_csv(self.spool.prints(job_id))
 
 
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        log.warning("cannot delete %s: %s", path, exc.strerror)
+
+
 def _version() -> str:
     try:
         from ... import __version__
@@ -284,7 +310,7 @@ def _version() -> str:
 
 
 def serve(config: ServerConfig, ready=None) -> int:
-    """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next pass
+    """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next stroke
     boundary and resumed by the next start."""
     server = PrintServer(config)
     server.start()
@@ -301,7 +327,9 @@ def serve(config: ServerConfig, ready=None) -> int:
         print(f"wideprint serve: job {job['id']}: {job['message']}", flush=True)
     if ready:
         ready(server)
+    notify(READY=1, STATUS=f"serving {server.url}")       # systemd Type=notify
     while not done.wait(1.0):
         pass
+    notify(STOPPING=1, STATUS="stopping: the printing job pauses at its next boundary")
     server.stop()
     return 0

@@ -51,10 +51,13 @@ CREATE TABLE IF NOT EXISTS jobs (
     started      REAL,
     finished     REAL,
     copy_started REAL,                        -- start of the copy now printing
-    passes_total INTEGER NOT NULL DEFAULT 0,
-    passes_done  INTEGER NOT NULL DEFAULT 0,
-    checkpoint   TEXT,                        -- JSON: x0, paper0, next_pass, epoch
-    attempt      INTEGER NOT NULL DEFAULT 1   -- 1, then +1 each time the operator requeues it
+    strokes_total INTEGER NOT NULL DEFAULT 0, -- carriage strokes of the copy printing
+    strokes_done INTEGER NOT NULL DEFAULT 0,
+    checkpoint   TEXT,                        -- JSON: x0, paper0, next_stroke, epoch, copy
+    attempt      INTEGER NOT NULL DEFAULT 1,  -- 1, then +1 each time the operator requeues it
+    printer      TEXT,                        -- the printer asked for (NULL: any printer)
+    printed_on   TEXT,                        -- the printer that took it (its checkpoint is that printer's)
+    fault        TEXT NOT NULL DEFAULT ''     -- a printer fault stopped it: held until cleared
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -68,8 +71,8 @@ CREATE TABLE IF NOT EXISTS prints (
     started        REAL NOT NULL,
     ended          REAL NOT NULL,
     duration_s     REAL NOT NULL,
-    passes_total   INTEGER NOT NULL,
-    passes_printed INTEGER NOT NULL,
+    strokes_total  INTEGER NOT NULL,
+    strokes_printed INTEGER NOT NULL,
     drops_c INTEGER NOT NULL, drops_m INTEGER NOT NULL,
     drops_y INTEGER NOT NULL, drops_k INTEGER NOT NULL,
     ink_c_ml REAL NOT NULL, ink_m_ml REAL NOT NULL,
@@ -87,10 +90,20 @@ CREATE TABLE IF NOT EXISTS prints (
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
 """
 
-SCHEMA_VERSION = "2"
-# columns added since schema 1: (table, column, definition), added to older databases
+SCHEMA_VERSION = "4"
+# columns added since schema 1: (table, column, definition), added to older databases;
+# schema 4: several printers (printer, printed_on), a fault stops a job (fault)
 ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
-                 ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"))
+                 ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"),
+                 ("jobs", "printer", "TEXT"),
+                 ("jobs", "printed_on", "TEXT"),
+                 ("jobs", "fault", "TEXT NOT NULL DEFAULT ''"))
+# columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
+# carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
+RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
+                   ("jobs", "passes_done", "strokes_done"),
+                   ("prints", "passes_total", "strokes_total"),
+                   ("prints", "passes_printed", "strokes_printed"))
 
 
 class SpoolError(Exception):
@@ -105,7 +118,9 @@ def _job_dict(row: sqlite3.Row) -> dict:
     d = dict(row)
     d["settings"] = json.loads(d["settings"])
     cp = d.pop("checkpoint")
-    d["checkpoint"] = json.loads(cp) if cp else None
+    d["checkpoint"] = cp = json.loads(cp) if cp else None
+    if cp is not None and "next_pass" in cp and "next_stroke" not in cp:
+        cp["next_stroke"] = cp.pop("next_pass")      # saved by schema 2: the same number
     d["interrupted"] = bool(d["interrupted"])
     return d
 
@@ -128,6 +143,10 @@ class Spool:
                 have = {r[1] for r in c.execute(f"PRAGMA table_info({table})")}
                 if column not in have:
                     c.execute(f"ALTER TABLE {table} ADD COLUMN {column} {definition}")
+            for table, old, new in RENAMED_COLUMNS:
+                have = {r[1] for r in c.execute(f"PRAGMA table_info({table})")}
+                if old in have and new not in have:
+                    c.execute(f"ALTER TABLE {table} RENAME COLUMN {old} TO {new}")
             c.execute("INSERT OR REPLACE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
             c.execute("INSERT OR IGNORE INTO meta VALUES ('printer_epoch', '0')")
 
@@ -164,16 +183,32 @@ class Spool:
             self._local.conn = None
 
     # -- meta ---------------------------------------------------------------------------
-    def epoch(self) -> int:
-        """The printer epoch: bumped whenever a job starts afresh on the printer; a
-        checkpoint from an older epoch is stale (something else printed since)."""
-        return int(self.db.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0])
+    @staticmethod
+    def _epoch_key(printer: str | None) -> str:
+        # the first printer keeps the key of the one-printer schema (its checkpoints stay valid)
+        return "printer_epoch" if printer in (None, "", "main") else f"printer_epoch:{printer}"
+
+    def _epoch(self, c, printer: str | None) -> int:
+        key = self._epoch_key(printer)
+        c.execute("INSERT OR IGNORE INTO meta VALUES (?, '0')", (key,))
+        return int(c.execute("SELECT value FROM meta WHERE key=?", (key,)).fetchone()[0])
+
+    def _bump_epoch(self, c, printer: str | None) -> int:
+        epoch = self._epoch(c, printer) + 1
+        c.execute("UPDATE meta SET value=? WHERE key=?", (str(epoch), self._epoch_key(printer)))
+        return epoch
+
+    def epoch(self, printer: str | None = None) -> int:
+        """A printer's epoch: bumped whenever a job starts afresh on that printer; a
+        checkpoint from an older epoch is stale (something else printed there since)."""
+        with self.tx() as c:
+            return self._epoch(c, printer)
 
     # -- jobs -----------------------------------------------------------------------------
     def add_job(self, *, name: str, source: str, spool_path: str, size: int, sha256: str,
                 settings: dict, preset: str | None = None, copies: int = 1, priority: int = 0,
                 hold: bool = False, key: str | None = None, client: str | None = None,
-                hot_path: str | None = None) -> tuple[dict, bool]:
+                hot_path: str | None = None, printer: str | None = None) -> tuple[dict, bool]:
         """Queue a job; returns (job, created).  With a key already used the existing job
         is returned (created False): a client's retry never makes a second job."""
         with self.tx() as c:
@@ -183,11 +218,11 @@ class Spool:
                     return _job_dict(row), False
             cur = c.execute(
                 "INSERT INTO jobs (key, name, source, client, spool_path, size, sha256, preset,"
-                " settings, copies, priority, state, hot_path, submitted)"
-                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " settings, copies, priority, state, hot_path, submitted, printer)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (key, name, source, client, spool_path, size, sha256, preset,
                  json.dumps(settings, sort_keys=True), copies, priority,
-                 "held" if hold else "queued", hot_path, time.time()))
+                 "held" if hold else "queued", hot_path, time.time(), printer))
             row = c.execute("SELECT * FROM jobs WHERE id=?", (cur.lastrowid,)).fetchone()
         return _job_dict(row), True
 
@@ -215,49 +250,58 @@ class Spool:
 
     QUEUE_ORDER = "ORDER BY interrupted DESC, priority DESC, id ASC"
 
-    def next_job(self) -> dict | None:
-        """The job the worker prints next: an interrupted one first (the paper is in the
-        middle of it), then by priority, then in submission order; held jobs wait."""
-        row = self.db.execute(f"SELECT * FROM jobs WHERE state='queued' {self.QUEUE_ORDER} LIMIT 1"
-                              ).fetchone()
+    def next_job(self, printer: str | None = None) -> dict | None:
+        """The job a printer's worker prints next: one that printer was interrupted in
+        first (the paper is in the middle of it), then by priority, then in submission order,
+        among the jobs for this printer or for any; held jobs wait.  A job interrupted on
+        another printer waits for that one (its checkpoint is that printer's)."""
+        if printer is None:
+            row = self.db.execute(f"SELECT * FROM jobs WHERE state='queued' {self.QUEUE_ORDER} LIMIT 1"
+                                  ).fetchone()
+        else:
+            row = self.db.execute(
+                "SELECT * FROM jobs WHERE state='queued' AND (printer IS NULL OR printer=?) "
+                "AND (interrupted=0 OR printed_on IS NULL OR printed_on=?) "
+                f"{self.QUEUE_ORDER} LIMIT 1", (printer, printer)).fetchone()
         return _job_dict(row) if row else None
 
     def queue_position(self) -> dict[int, int]:
         rows = self.db.execute(f"SELECT id FROM jobs WHERE state='queued' {self.QUEUE_ORDER}")
         return {r[0]: i + 1 for i, r in enumerate(rows)}
 
-    def claim(self, job_id: int) -> dict | None:
-        """queued -> printing, for the worker.  Resumes an interrupted job whose checkpoint
-        is still valid; otherwise the job starts afresh and the printer epoch moves on."""
+    def claim(self, job_id: int, printer: str | None = None) -> dict | None:
+        """queued -> printing on `printer`, for its worker.  Resumes an interrupted job whose
+        checkpoint is still valid there (the same printer, nothing printed since);
+        otherwise the job starts afresh and that printer's epoch moves on."""
         now = time.time()
         with self.tx() as c:
             row = c.execute("SELECT * FROM jobs WHERE id=? AND state='queued'", (job_id,)).fetchone()
             if row is None:
                 return None
             job = _job_dict(row)
-            epoch = int(c.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0])
+            epoch = self._epoch(c, printer)
             cp = job["checkpoint"]
-            if cp is not None and cp.get("epoch") != epoch:
+            if cp is not None and (cp.get("epoch") != epoch or
+                                   (job["printed_on"] or None) not in (None, printer)):
                 cp = None                    # something else printed since: start over
             if cp is None:
-                epoch += 1
-                c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
-                c.execute("UPDATE jobs SET checkpoint=NULL, passes_done=0, copy_started=? "
+                epoch = self._bump_epoch(c, printer)
+                c.execute("UPDATE jobs SET checkpoint=NULL, strokes_done=0, copy_started=? "
                           "WHERE id=?", (now, job_id))
             c.execute("UPDATE jobs SET state='printing', started=COALESCE(started, ?), "
-                      "copy_started=COALESCE(copy_started, ?), message='' WHERE id=?",
-                      (now, now, job_id))
+                      "copy_started=COALESCE(copy_started, ?), message='', printed_on=?, "
+                      "fault='' WHERE id=?", (now, now, printer, job_id))
             row = c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone()
         job = _job_dict(row)
         job["epoch"] = epoch
         return job
 
-    def save_checkpoint(self, job_id: int, checkpoint: dict, passes_total: int) -> None:
-        """After every pass: where a restarted server resumes this job."""
+    def save_checkpoint(self, job_id: int, checkpoint: dict, strokes_total: int) -> None:
+        """After every stroke: where a restarted server resumes this job."""
         with self.tx() as c:
-            c.execute("UPDATE jobs SET checkpoint=?, passes_done=?, passes_total=? WHERE id=?",
-                      (json.dumps(checkpoint, sort_keys=True), int(checkpoint.get("next_pass", 0)),
-                       passes_total, job_id))
+            c.execute("UPDATE jobs SET checkpoint=?, strokes_done=?, strokes_total=? WHERE id=?",
+                      (json.dumps(checkpoint, sort_keys=True),
+                       int(checkpoint.get("next_stroke", 0)), strokes_total, job_id))
 
     def copy_done(self, job_id: int) -> dict:
         """One copy printed: the next copy starts afresh."""
@@ -270,16 +314,51 @@ class Spool:
         """A later copy starts: a fresh placement on the printer (new epoch)."""
         now = time.time()
         with self.tx() as c:
-            epoch = int(c.execute("SELECT value FROM meta WHERE key='printer_epoch'").fetchone()[0]) + 1
-            c.execute("UPDATE meta SET value=? WHERE key='printer_epoch'", (str(epoch),))
-            c.execute("UPDATE jobs SET copy_started=?, passes_done=0 WHERE id=?", (now, job_id))
+            row = c.execute("SELECT printed_on FROM jobs WHERE id=?", (job_id,)).fetchone()
+            self._bump_epoch(c, row[0] if row else None)
+            c.execute("UPDATE jobs SET copy_started=?, strokes_done=0 WHERE id=?", (now, job_id))
+
+    def stop_for_fault(self, job_id: int, message: str) -> dict:
+        """A printer fault stopped the job: it is held, with its checkpoint and the fault,
+        until the operator clears the fault (resume: back to the queue, where it goes on at
+        its first unfinished stroke; or fail it).  docs/server.md, "Printer faults"."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET state='held', interrupted=1, fault=?, message=? "
+                      "WHERE id=? AND state='printing'", (message, message, job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def fault_stopped(self, printer: str | None) -> list[dict]:
+        """The jobs a fault of `printer` stopped (normally one)."""
+        rows = self.db.execute("SELECT * FROM jobs WHERE state='held' AND fault != '' AND "
+                               "(printed_on IS ? OR printed_on = ?) ORDER BY id",
+                               (printer, printer)).fetchall()
+        return [_job_dict(r) for r in rows]
+
+    def resume_after_fault(self, job_id: int) -> dict:
+        """The fault is cleared: the stopped job goes back to the head of its printer's
+        queue (interrupted), its checkpoint kept."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET state='queued', fault='', message='' WHERE id=? AND "
+                      "state='held' AND fault != ''", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def set_printer(self, job_id: int, printer: str | None) -> dict:
+        """Move a job that has not started to another printer (None: any)."""
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            if job["state"] not in ("queued", "held") or job["interrupted"]:
+                raise SpoolError(f"job {job_id} is {job['state']}"
+                                 + (" part-way" if job["interrupted"] else "")
+                                 + ": only a job not yet started can move to another printer")
+            c.execute("UPDATE jobs SET printer=? WHERE id=?", (printer, job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
     def finish(self, job_id: int, state: str, message: str = "", keep_copy: bool = False) -> dict:
         """The job ended.  keep_copy: its spool copy stays (a failed or cancelled job the
         operator may requeue); otherwise the caller deletes the file."""
         assert state in FINAL
         with self.tx() as c:
-            c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, "
+            c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, fault='', "
                       "checkpoint=NULL, spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
                       (state, message, time.time(), int(keep_copy), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
@@ -308,6 +387,10 @@ class Spool:
                 return job
             if job["state"] != "held":
                 raise SpoolError(f"job {job_id} is {job['state']}: only a held job can be released")
+            if job["fault"]:
+                raise SpoolError(f"job {job_id} was stopped by a printer fault ({job['fault']}): "
+                                 f"clear the fault on printer {job['printed_on'] or 'main'} "
+                                 f"to resume it or fail it")
             c.execute("UPDATE jobs SET state='queued' WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
@@ -329,14 +412,14 @@ class Spool:
             if job["state"] in FINAL:
                 raise SpoolError(f"job {job_id} is already {job['state']}")
             c.execute("UPDATE jobs SET state='cancelled', message='cancelled by the operator', "
-                      "finished=?, interrupted=0, checkpoint=NULL, "
+                      "finished=?, interrupted=0, fault='', checkpoint=NULL, "
                       "spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
                       (time.time(), int(keep_copy), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
     def requeue(self, job_id: int) -> dict:
         """The operator puts a failed or cancelled job back in the queue (docs/server.md,
-        "Requeue"): a fresh print of its spooled copy, from its first pass, with the same
+        "Requeue"): a fresh print of its spooled copy, from its first stroke, with the same
         settings, preset, copies and priority, as attempt N+1.  Its `prints` rows stay."""
         with self.tx() as c:
             job = self._get_for_change(c, job_id)
@@ -360,7 +443,7 @@ class Spool:
             # hot_path: the original already went to failed/ with the first attempt's reason;
             # the new attempt moves no hot-folder file (a new file of that name is a new job)
             c.execute("UPDATE jobs SET state='queued', attempt=attempt+1, message='', "
-                      "copies_done=0, passes_done=0, passes_total=0, checkpoint=NULL, "
+                      "copies_done=0, strokes_done=0, strokes_total=0, checkpoint=NULL, "
                       "interrupted=0, started=NULL, finished=NULL, copy_started=NULL, "
                       "hot_path=NULL WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
@@ -383,14 +466,14 @@ class Spool:
 
     def recover(self, on_crash: str) -> list[dict]:
         """At start-up: jobs left `printing` by a server that died.  `resume`: back to the
-        head of the queue, resumed at their first unfinished pass; `hold`: held for the
+        head of the queue, resumed at their first unfinished stroke; `hold`: held for the
         operator (release resumes them if nothing else printed since)."""
         out = []
         with self.tx() as c:
             for row in c.execute("SELECT * FROM jobs WHERE state='printing'").fetchall():
                 job = _job_dict(row)
                 cp = job["checkpoint"] or {}
-                at = f"pass {cp['next_pass']}" if "next_pass" in cp else "the start"
+                at = f"stroke {cp['next_stroke']}" if "next_stroke" in cp else "the start"
                 if on_crash == "hold":
                     msg = (f"interrupted (server stopped) before {at}; held: release to "
                            f"resume there, or cancel")

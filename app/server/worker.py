@@ -1,5 +1,5 @@
 """The print worker: prints queued jobs one at a time on the server's printer, persisting
-each job's checkpoint after every pass (docs/server.md, "The worker")."""
+each job's checkpoint after every stroke (docs/server.md, "The worker")."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ class Worker(threading.Thread):
         self.dev = None
         self.printer_state = "idle"        # idle, printing, offline
         self.printer_error = ""
-        self.current: dict | None = None   # id, name, copy, state, detail, pass, ...
+        self.current: dict | None = None   # id, name, copy, state, detail, stroke, ...
         self.job = None                    # the PrintJob now running
         self._cancel: set[int] = set()
         self._backoff = server.config.reconnect_backoff[0]
@@ -65,7 +65,7 @@ class Worker(threading.Thread):
         self._cancel.discard(job_id)
 
     def interrupt(self, timeout: float) -> None:
-        """Server shutdown: the running job pauses at its next pass boundary (its
+        """Server shutdown: the running job pauses at its next stroke boundary (its
         checkpoint is saved), so a restart resumes it; the worker takes nothing new."""
         self.stopping = True
         self.notify()
@@ -147,8 +147,8 @@ class Worker(threading.Thread):
             return
         resumed = job["checkpoint"] is not None
         self.current = dict(id=job_id, name=job["name"], copy=job["copies_done"] + 1,
-                            copies=job["copies"], state="ripping", detail="", pass_index=None,
-                            passes_total=job["passes_total"], passes_printed=job["passes_done"],
+                            copies=job["copies"], state="ripping", detail="", stroke_index=None,
+                            strokes_total=job["strokes_total"], strokes_printed=job["strokes_done"],
                             resumed=resumed)
         self.printer_state = "printing"
         settings = dict(job["settings"])
@@ -163,7 +163,7 @@ class Worker(threading.Thread):
                 self.spool.start_copy(job_id)
                 job = self.spool.get(job_id)
                 resumed = False
-            self.current.update(copy=copy, state="ripping", pass_index=None, passes_printed=0)
+            self.current.update(copy=copy, state="ripping", stroke_index=None, strokes_printed=0)
             cp = job["checkpoint"] if first else None
             first = False
             started = job["copy_started"] or time.time()
@@ -199,13 +199,13 @@ class Worker(threading.Thread):
                     if kind == "checkpoint":
                         self.spool.save_checkpoint(job_id, dict(kw["checkpoint"], epoch=epoch,
                                                                 copy=copy),
-                                                   pj.report.passes_total)
-                        cur["passes_printed"] = kw["checkpoint"].get("next_pass", 0)
-                        cur["passes_total"] = pj.report.passes_total
+                                                   pj.report.strokes_total)
+                        cur["strokes_printed"] = kw["checkpoint"].get("next_stroke", 0)
+                        cur["strokes_total"] = pj.report.strokes_total
                     elif kind == "state":
                         cur["state"], cur["detail"] = kw["state"], kw.get("detail", "")
-                    elif kind == "pass":
-                        cur["pass_index"], cur["passes_total"] = kw["index"], kw["total"]
+                    elif kind == "stroke":
+                        cur["stroke_index"], cur["strokes_total"] = kw["index"], kw["total"]
 
                 pj = PrintJob(dev, rip, job_id=job_id, on_event=on_event, resume=cp)
                 self.job = pj
@@ -275,7 +275,7 @@ class Worker(threading.Thread):
         row = dict(job_id=job["id"], copy=copy, file=job["name"], source=job["source"],
                    preset=job["preset"], settings=json.dumps(job["settings"], sort_keys=True),
                    started=started, ended=ended, duration_s=round(ended - started, 3),
-                   passes_total=r.get("passes_total", 0), passes_printed=r.get("passes_printed", 0),
+                   strokes_total=r.get("strokes_total", 0), strokes_printed=r.get("strokes_printed", 0),
                    width_dots=r.get("width_dots", 0), height_rows=r.get("height_rows", 0),
                    area_m2=r.get("area_m2", 0.0), outcome=outcome, message=message,
                    resumed=int(bool(resumed)), recoveries=r.get("recoveries", 0),

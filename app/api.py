@@ -1,0 +1,323 @@
+"""wideprint's stable Python API (docs/acceptance.md): rip, print, compare.
+
+Everything named in `__all__` keeps its meaning within a major `API_VERSION`: a name is
+removed or changed only in the next major version, after at least one minor version in
+which using it raises a DeprecationWarning saying what replaces it.  What is not in
+`__all__` (every other module of the package) may change at any release.
+
+    from wideprint.app import api
+    planes = api.rip("poster.tif", settings={"dpi": 300, "passes": 2})
+    result = api.print_file("poster.tif", settings={"dpi": 300, "passes": 2})
+    assert api.compare(result.media, planes).equal
+
+The pytest plugin (app/pytest_plugin.py) is built on it; so is `wideprint print`.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+API_VERSION = "1.0"
+COLORS = "CMYK"
+
+__all__ = ["API_VERSION", "Comparison", "EmulatedPrinter", "PrintResult", "compare",
+           "diff_image", "load_profile", "print_file", "read_planes", "rip", "rip_settings"]
+
+
+# -- settings and profiles -----------------------------------------------------------------
+def load_profile(path: str | Path | None = None):
+    """The printer profile (default: the built-in one), validated (ProfileError names the
+    file, section and key)."""
+    from ..rip.profile import load_profile as _load
+    return _load(path)
+
+
+def rip_settings(settings: Any = None, profile=None, **kw):
+    """RipSettings from a RipSettings, a settings mapping (docs/settings.md: placement in a
+    nested "placement" object) and/or keyword settings (placement ones allowed flat, e.g.
+    size="pixels"), checked against the printer profile; ValueError names the setting."""
+    from ..rip.settings import PLACEMENT_KEYS, RipSettings, from_mapping, merge
+    if isinstance(settings, RipSettings):
+        if kw:
+            raise TypeError("give either a RipSettings or settings to build one, not both")
+        if profile is not None:
+            settings.check(profile)
+        return settings
+    flat = {"placement": {k: v for k, v in kw.items() if k in PLACEMENT_KEYS}}
+    flat.update({k: v for k, v in kw.items() if k not in PLACEMENT_KEYS})
+    if not flat["placement"]:
+        del flat["placement"]
+    return from_mapping(merge(dict(settings or {}), flat), profile)
+
+
+def read_planes(path: str | Path) -> np.ndarray:
+    """A planes or media TIFF (docs/formats.md) as uint8 (rows, columns, 4): C, M, Y, K
+    drops per dot."""
+    from ..rip.planes import read_planes as _read
+    return _read(path)
+
+
+def rip(file: str | Path, settings: Any = None, *, profile=None, out: str | Path | None = None,
+        **kw) -> np.ndarray:
+    """The halftone the RIP means for `file` (what `wideprint rip` writes), as a planes array;
+    also written to `out` when given.  Raises rip.load.ImageError for a file it cannot read."""
+    from ..rip.pipeline import RipJob
+    profile = profile if profile is not None else load_profile()
+    rs = rip_settings(settings, profile, **kw)
+    with tempfile.TemporaryDirectory(prefix="wideprint-rip-") as d:
+        target = Path(out) if out else Path(d) / "planes.tif"
+        job = RipJob(str(file), rs, profile)
+        try:
+            job.write_planes(target)
+        finally:
+            job.close()
+        return read_planes(target)
+
+
+# -- printing -------------------------------------------------------------------------------
+@dataclass
+class PrintResult:
+    """One printed job."""
+    file: str
+    state: str                          # done | failed | cancelled
+    message: str = ""
+    report: dict = field(default_factory=dict)      # the job report (`print --report` keys)
+    media: np.ndarray | None = None     # what landed (emulator only), planes layout
+    media_path: Path | None = None
+    events: list = field(default_factory=list)      # the emulator's event log records
+    settings: Any = None                # the RipSettings it was printed with
+    profile: Any = None
+    planes: np.ndarray | None = None    # test prints: the pattern's planes
+
+    @property
+    def ok(self) -> bool:
+        return self.state == "done"
+
+    @property
+    def ink_ml(self) -> list[float]:
+        return list(self.report.get("ink_ml", [0.0] * 4))
+
+    @property
+    def faults(self) -> list[str]:
+        """The faults the printer latched during the job (emulator event log), by name."""
+        return [e.get("fault", "") for e in self.events if e.get("event") == "fault"]
+
+
+class EmulatedPrinter:
+    """The in-process emulator as one printer that keeps its state between jobs (paper
+    position, faults, head configuration), like a real one; or, with `device=`, a real
+    printer (no media read-back).  Use as a context manager.
+
+        with EmulatedPrinter(faults=["dead-nozzle=M1:57"]) as printer:
+            result = printer.print("chart.tif", passes=2)
+    """
+
+    def __init__(self, profile=None, *, faults: Iterable[str] | None = None,
+                 device: str = "emulator", machine_profile=None,
+                 workdir: str | Path | None = None):
+        from ..device_sim.faults import Faults
+        from .devices import is_emulator_spec, open_device
+        self.profile = profile if profile is not None else load_profile()
+        if isinstance(self.profile, (str, Path)):
+            self.profile = load_profile(self.profile)
+        self.device_spec = device
+        self.emulated = is_emulator_spec(device)
+        self.faults = Faults.parse(list(faults or []))
+        if faults and not self.emulated:
+            raise ValueError("faults can only be injected into the emulator")
+        self._tmp = None
+        if workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="wideprint-printer-")
+            workdir = self._tmp.name
+        self.workdir = Path(workdir)
+        self.workdir.mkdir(parents=True, exist_ok=True)
+        self._media: dict[int, Path] = {}
+        self.jobs = 0
+        self.device = open_device(device, self.profile, self.faults if self.emulated else None,
+                                  media_path=lambda job: str(self._media[job]) if job in self._media else None,
+                                  machine_profile=machine_profile)
+
+    @property
+    def emulator(self):
+        return self.device.emulator
+
+    def print(self, file: str | Path, settings: Any = None, *, media_out: str | Path | None = None,
+              **kw) -> PrintResult:
+        """Rip and print one file; never raises for a job that fails (the result says why),
+        only for settings that are refused (ValueError)."""
+        from ..rip.load import ImageError
+        from ..rip.pipeline import RipJob
+        rs = rip_settings(settings, self.profile, **kw)
+        result = PrintResult(file=str(file), state="failed", settings=rs, profile=self.profile)
+        try:
+            job = RipJob(str(file), rs, self.profile)
+        except (ImageError, ValueError, OSError) as exc:
+            self.jobs += 1
+            result.message = str(exc)
+            return result
+        return self._run(job, result, media_out)
+
+    def print_pattern(self, pattern: str, *, width_mm: float = 100.0, dpi: int = 150,
+                      head: str = "K1", nozzle: int = 64,
+                      media_out: str | Path | None = None) -> PrintResult:
+        """A test print (`wideprint test-print`: nozzle-check, line, sawtooth, bidir-align,
+        head-align); `result.planes` holds the pattern's planes."""
+        from ..rip.testprints import PatternJob
+        width = int(round(width_mm / 25.4 * self.profile.counts_per_inch / self.profile.k(dpi)))
+        job = PatternJob.for_pattern(pattern, self.profile, width, dpi, head=head, nozzle=nozzle)
+        result = PrintResult(file=f"test-print:{pattern}", state="failed", settings=job.settings,
+                             profile=self.profile, planes=job.planes)
+        return self._run(job, result, media_out)
+
+    def _run(self, rip_job, result: PrintResult, media_out) -> PrintResult:
+        from ..driver.job import JobCancelled, JobError, PrintJob
+        from ..rip.load import ImageError
+        self.jobs += 1
+        job_id = self.jobs
+        media = Path(media_out) if media_out else self.workdir / f"media-{job_id}.tif"
+        if self.emulated:
+            self._media[job_id] = media
+        events0 = len(self.emulator.events) if self.emulated else 0
+        pj = PrintJob(self.device, rip_job, job_id=job_id)
+        try:
+            pj.run()
+            result.state = "done"
+        except JobCancelled as exc:
+            result.state, result.message = "cancelled", str(exc)
+        except (JobError, ImageError) as exc:
+            result.message = str(exc)
+        finally:
+            rip_job.close()
+        result.report = dict(pj.report.as_dict(), state=result.state,
+                             message=result.message or pj.report.message)
+        if self.emulated:
+            if result.state != "done":
+                self.emulator.abandon_job()      # complete its media file for inspection
+            result.events = list(self.emulator.events)[events0:]
+            if media.exists():
+                result.media_path, result.media = media, read_planes(media)
+        return result
+
+    def close(self) -> None:
+        from .devices import close_device
+        close_device(self.device)
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def __enter__(self) -> "EmulatedPrinter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def print_file(file: str | Path, settings: Any = None, *, device: str = "emulator",
+               profile=None, faults: Iterable[str] | None = None,
+               media_out: str | Path | None = None, **kw) -> PrintResult:
+    """Print one file on a fresh printer (the in-process emulator by default) and return
+    what happened: the report, and on the emulator the media that landed (also written to
+    `media_out` when given)."""
+    with tempfile.TemporaryDirectory(prefix="wideprint-print-") as d:
+        with EmulatedPrinter(profile, faults=faults, device=device, workdir=d) as printer:
+            result = printer.print(file, settings, media_out=media_out, **kw)
+        if result.media_path is not None and media_out is None:
+            result.media_path = None                    # it was in the temporary folder
+        return result
+
+
+# -- comparing ------------------------------------------------------------------------------
+@dataclass
+class Comparison:
+    """Media against planes, dot for dot."""
+    equal: bool
+    shape_a: tuple
+    shape_b: tuple
+    differing: int = 0
+    missing: list = field(default_factory=lambda: [0] * 4)   # per channel: in b, not in a
+    stray: list = field(default_factory=lambda: [0] * 4)     # per channel: in a, not in b
+    drops_a: list = field(default_factory=lambda: [0] * 4)
+    drops_b: list = field(default_factory=lambda: [0] * 4)
+    first: list = field(default_factory=list)                 # [(row, column, "C", a, b)]
+
+    def explain(self, a_name: str = "media", b_name: str = "planes") -> str:
+        if self.shape_a != self.shape_b:
+            return (f"{a_name} is {self.shape_a[1]} x {self.shape_a[0]} dots but {b_name} is "
+                    f"{self.shape_b[1]} x {self.shape_b[0]}")
+        if self.equal:
+            return f"{a_name} equals {b_name}: {self.shape_a[1]} x {self.shape_a[0]} dots"
+        lines = [f"{self.differing} dots differ between {a_name} and {b_name} "
+                 f"({self.shape_a[1]} x {self.shape_a[0]} dots)"]
+        for i, c in enumerate(COLORS):
+            if self.missing[i] or self.stray[i]:
+                lines.append(f"  {c}: {a_name} {self.drops_a[i]} drops, {b_name} {self.drops_b[i]}; "
+                             f"{self.missing[i]} missing, {self.stray[i]} stray")
+        lines.append("  first differences (row, column, ink: "
+                     f"{a_name} / {b_name}): "
+                     + ", ".join(f"({r}, {col}, {c}: {va} / {vb})" for r, col, c, va, vb in self.first))
+        return "\n".join(lines)
+
+
+def _as_planes(x) -> np.ndarray:
+    if isinstance(x, (str, Path)):
+        return read_planes(x)
+    if isinstance(x, PrintResult):
+        if x.media is None:
+            raise ValueError(f"{x.file}: no media (a real printer, or the job printed nothing)")
+        return x.media
+    return np.asarray(x)
+
+
+def compare(a, b, first: int = 10) -> Comparison:
+    """Compare two planes arrays, planes/media TIFFs or a PrintResult's media."""
+    a, b = _as_planes(a), _as_planes(b)
+    cmp = Comparison(equal=False, shape_a=a.shape, shape_b=b.shape)
+    if a.shape != b.shape:
+        return cmp
+    diff = a != b
+    cmp.differing = int(diff.any(axis=-1).sum())
+    cmp.drops_a = [int(v) for v in a.reshape(-1, 4).sum(axis=0, dtype=np.int64)]
+    cmp.drops_b = [int(v) for v in b.reshape(-1, 4).sum(axis=0, dtype=np.int64)]
+    cmp.missing = [int(((b[..., i] > 0) & (a[..., i] == 0)).sum()) for i in range(4)]
+    cmp.stray = [int(((a[..., i] > 0) & (b[..., i] == 0)).sum()) for i in range(4)]
+    cmp.equal = cmp.differing == 0
+    if not cmp.equal:
+        r, c, ch = np.nonzero(diff)
+        cmp.first = [(int(r[i]), int(c[i]), COLORS[ch[i]], int(a[r[i], c[i], ch[i]]),
+                      int(b[r[i], c[i], ch[i]])) for i in range(min(first, len(r)))]
+    return cmp
+
+
+def diff_image(a, b, path: str | Path, max_side: int = 2000) -> Path:
+    """A PNG of where two planes differ: grey where they agree on a drop, red where b has a
+    drop a lacks (missing), blue where a has one b lacks (stray), white elsewhere; area
+    reduced (a differing dot in a block colours the block) to at most `max_side` pixels."""
+    import cv2
+    a, b = _as_planes(a), _as_planes(b)
+    h, w = max(a.shape[0], b.shape[0]), max(a.shape[1], b.shape[1])
+    pa = np.zeros((h, w, 4), np.uint8)
+    pb = np.zeros((h, w, 4), np.uint8)
+    pa[:a.shape[0], :a.shape[1]] = a
+    pb[:b.shape[0], :b.shape[1]] = b
+    missing = ((pb > 0) & (pa == 0)).any(axis=-1)
+    stray = ((pa > 0) & (pb == 0)).any(axis=-1)
+    agree = ((pa > 0) & (pb > 0)).any(axis=-1)
+    step = max(1, -(-max(h, w) // max_side))
+    if step > 1:                                   # block-reduce: any differing dot shows
+        hh, ww = -(-h // step) * step, -(-w // step) * step
+        def red(m):
+            m2 = np.zeros((hh, ww), bool)
+            m2[:h, :w] = m
+            return m2.reshape(hh // step, step, ww // step, step).any(axis=(1, 3))
+        missing, stray, agree = red(missing), red(stray), red(agree)
+    img = np.full(missing.shape + (3,), 255, np.uint8)          # BGR for OpenCV
+    img[agree] = (160, 160, 160)
+    img[stray] = (255, 0, 0)
+    img[missing] = (0, 0, 255)
+    path = Path(path)
+    cv2.imwrite(str(path), img)
+    return path
