@@ -459,6 +459,7 @@ class _Parser:
                     if self.language not in ("RTL", "PCL", "HPGL2", "HPGL", "PCL3GUI"):
                         raise self.fail(start, f"the PJL header switches to {self.language}, not RTL "
                                                f"(send PostScript or PDF without the PJL header)")
+                s.skip_to_esc()                        # the PJL lines are not stray bytes
             elif letter == "B":                        # HP-GL/2: skipped up to ESC%#A, ESC E or UEL
                 yield from self._end()
                 skipped = 0

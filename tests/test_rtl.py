@@ -80,6 +80,7 @@ def test_hpgl2_pjl_and_stray_commands_are_skipped(tmp_path):
     assert np.array_equal(decode(p), dots)
     assert any("HP-GL/2" in w for w in src.warnings)
     assert any("ESC*p200Y is ignored" in w for w in src.warnings)
+    assert not any("outside escape sequences" in w for w in src.warnings)     # PJL lines are expected
 
 
 def test_commands_and_data_across_read_chunks(tmp_path, monkeypatch):
