@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import signal
@@ -75,42 +76,142 @@ def _media_path(pattern: str | None, index: int, count: int) -> str | None:
     if not pattern:
         return None
     if "{job}" in pattern:
-        return pattern.format(job=index + 1)
+        return pattern.replace("{job}", str(index + 1))
     if count == 1:
         return pattern
     p = Path(pattern)
     return str(p.with_name(f"{p.stem}-{index + 1}{p.suffix}"))
 
 
+NAME_LIMIT = 400      # characters of a file name shown on the terminal
+_BIDI_CONTROLS = set(range(0x202A, 0x202F)) | set(range(0x2066, 0x206A)) | {0x200E, 0x200F, 0x061C}
+
+
+def shown(text, limit: int | None = None) -> str:
+    """A file name (or a message holding one) safe to print on a terminal: control and
+    bidirectional-override characters and the undecodable bytes of a non-UTF-8 name
+    (surrogate escapes) are written as \\xNN / \\uNNNN, never sent raw.  `limit`: a longer
+    text keeps its start and end (a path can be longer than a screen)."""
+    import unicodedata
+    text = str(text)
+    if limit is not None and len(text) > limit:
+        cut = len(text) - limit
+        text = f"{text[:limit // 2]}...({cut} characters)...{text[-(limit // 2):]}"
+    out = []
+    for ch in text:
+        o = ord(ch)
+        if 0xDC80 <= o <= 0xDCFF:                    # a byte of a non-UTF-8 file name
+            out.append(f"\\x{o - 0xDC00:02x}")
+        elif o < 0x20 or 0x7F <= o < 0xA0:
+            out.append(f"\\x{o:02x}")
+        elif o in _BIDI_CONTROLS or unicodedata.category(ch) in ("Cs", "Zl", "Zp"):
+            out.append(f"\\u{o:04x}")
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def cli_job_base() -> int:
+    """The printer job id of this run's first job (the next files count on from it).  Ids
+    differ between runs - hundredths of a second, wrapping after about 347 days - so a
+    standalone emulator's `{job}` media names are not reused by the next run; they are
+    at least 1e9, above the print server's queue ids (docs/formats.md)."""
+    return 1_000_000_000 + int(time.time() * 100) % 3_000_000_000
+
+
+def _check_icc(settings) -> None:
+    """A missing or unusable --input-icc / --output-icc is a bad option (ValueError),
+    refused before any job; whether a profile fits an image's colour space is the job's."""
+    from ..rip.color import Separator
+    if settings.input_icc is not None:      # CMYK pass-through still reads and checks it
+        Separator("cmyk", 8, input_icc=settings.input_icc)
+    if settings.output_icc is not None:
+        Separator("cmyk", 8, output_icc=settings.output_icc)
+
+
+def _check_output_folders(**paths) -> None:
+    """Output files must have a folder to go to: said before anything prints."""
+    import os
+    for option, path in paths.items():
+        if not path:
+            continue
+        folder = os.path.dirname(path) or "."
+        if os.path.isdir(path):
+            raise ValueError(f"--{option.replace('_', '-')} {shown(path)} is a folder, not a file")
+        if not os.path.isdir(folder):
+            raise ValueError(f"--{option.replace('_', '-')} {shown(path)}: no folder {shown(folder)}")
+        if not os.access(folder, os.W_OK):
+            raise ValueError(f"--{option.replace('_', '-')} {shown(path)}: folder {shown(folder)} "
+                             f"is not writable")
+
+
 def cmd_rip(args) -> int:
     from ..rip.load import ImageError
     from ..rip.pipeline import RipJob
+    from ..rip.planes import output_file
     try:
         profile = _profile(args)
-        job = RipJob(args.file, _settings(args, profile), profile)
-        dots = job.write_planes(args.output)
+        settings = _settings(args, profile)
+        _check_icc(settings)
+        _check_output_folders(output=args.output)
+    except (ValueError, OSError) as exc:
+        print(f"wideprint rip: {shown(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    job = None
+    try:
+        job = RipJob(args.file, settings, profile)
+        # a temporary name, renamed when complete: a failed rip leaves no partial file
+        with output_file(args.output) as tmp:
+            dots = job.write_planes(tmp)
     except (ImageError, ValueError, OSError) as exc:
-        print(f"wideprint rip: {exc}", file=sys.stderr)
+        print(f"wideprint rip: {shown(exc)}", file=sys.stderr)
         return EXIT_JOB_FAILED
-    print(f"{args.output}: {job.width} x {job.height} dots at {job.settings.dpi} x "
-          f"{job.dpi_y:.1f} dpi, drops C {dots[0]} M {dots[1]} Y {dots[2]} K {dots[3]}")
+    except Exception as exc:  # noqa: BLE001 - a message, not a traceback
+        print(f"wideprint rip: {shown(args.file, NAME_LIMIT)}: internal error: "
+              f"{type(exc).__name__}: {shown(exc)}", file=sys.stderr)
+        return EXIT_JOB_FAILED
+    finally:
+        if job is not None:
+            job.close()
+    print(f"{shown(args.output)}: {job.width} x {job.height} dots at {job.settings.dpi} x "
+          f"{job.dpi_y:.1f} dpi, drops C {dots[0]} M {dots[1]} Y {dots[2]} K {dots[3]}",
+          file=sys.stderr if _is_stdout(args.output) else sys.stdout)   # -o /dev/stdout
     return EXIT_OK
 
 
-def _expand(files: list[str]) -> list[str]:
-    out = []
+def _is_stdout(path: str) -> bool:
+    import os
+    try:
+        return os.path.samestat(os.stat(path), os.fstat(sys.stdout.fileno()))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _expand(files: list[str]) -> tuple[list[str], dict[str, str]]:
+    """The files to print, and why a folder among them could not be listed."""
+    out, problems = [], {}
     for f in files:
         p = Path(f)
-        if p.is_dir():
-            out += sorted(str(c) for c in p.iterdir() if c.is_file() and not c.name.startswith("."))
-        else:
+        try:
+            is_dir = p.is_dir()
+        except OSError:                  # e.g. a name longer than PATH_MAX: open_image says so
+            is_dir = False
+        if not is_dir:
             out.append(f)
-    return out
+            continue
+        try:
+            out += sorted(str(c) for c in p.iterdir() if not c.name.startswith(".") and c.is_file())
+        except OSError as exc:
+            out.append(f)
+            problems[f] = f"{f}: cannot list the folder: {exc.strerror or exc}"
+    return out, problems
 
 
 def cmd_print(args) -> int:
+    import os
+    import tempfile
     from ..device_sim.faults import Faults
-    from .devices import open_device
+    from .devices import is_emulator_spec, open_device
     from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
     from ..driver.printer import Printer
@@ -118,34 +219,73 @@ def cmd_print(args) -> int:
     from ..rip.pipeline import RipJob
     from .server_cli import progress
 
-    files = _expand(args.files)
+    files, unlisted = _expand(args.files)
+    reports: list[dict] = []
+
+    def finish(code: int) -> int:
+        """Every exit writes --report and --json (files not reached: failed, with why)."""
+        if args.report:
+            try:
+                Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
+            except OSError as exc:
+                print(f"wideprint print: cannot write the report {shown(args.report)}: "
+                      f"{exc.strerror or exc}", file=sys.stderr)
+                code = code or EXIT_JOB_FAILED
+        if args.json:
+            print(json.dumps(reports, indent=2))
+        return code
+
+    def refuse(code: int, message: str) -> int:
+        print(f"wideprint print: {shown(message)}", file=sys.stderr)
+        reports.extend(dict(file=f, state="failed", message=f"not printed: {message}")
+                       for f in files)
+        return finish(code)
+
+    emulator = is_emulator_spec(args.device)
     try:
         profile = _profile(args)
         faults = Faults.parse(args.inject)
         settings = _settings(args, profile)
-    except ValueError as exc:
-        print(f"wideprint print: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        _check_icc(settings)
+        _check_output_folders(report=args.report, media_out=args.media_out,
+                              preview=args.preview, log_json=args.log_json,
+                              event_log=args.event_log)
+    except (ValueError, OSError) as exc:
+        return refuse(EXIT_USAGE, str(exc))
     if args.inject and args.device != "emulator":
-        print("wideprint print: --inject needs --device emulator", file=sys.stderr)
-        return EXIT_USAGE
-    media = {}
+        return refuse(EXIT_USAGE, "--inject needs --device emulator")
+    only_emulator = [o for o, v in (("--media-out", args.media_out), ("--preview", args.preview),
+                                    ("--event-log", args.event_log), ("--vcd", args.vcd),
+                                    ("--latched-out", args.latched_out)) if v]
+    if only_emulator and not emulator:
+        # a standalone emulator writes its media in its own process (`wideprint emulator
+        # --media-out`); a real printer has none
+        return refuse(EXIT_USAGE, f"{', '.join(only_emulator)} "
+                      f"{'needs' if len(only_emulator) == 1 else 'need'} the in-process emulator "
+                      f"(--device emulator); with --device {args.device} the media is written "
+                      f"by the device: `wideprint emulator --media-out MEDIA_{{job}}.tif`")
+    media: dict[int, str | None] = {}
+    scratch = tempfile.TemporaryDirectory(prefix="wideprint-") \
+        if args.preview and not args.media_out else None
     try:
         dev = open_device(args.device, profile, faults, media_path=lambda job: media.get(job),
                           event_log=args.event_log, **_emulator_options(args))
     except (LinkError, ValueError, OSError) as exc:
-        print(f"wideprint print: {exc}", file=sys.stderr)
-        return EXIT_DEVICE
+        if scratch:
+            scratch.cleanup()
+        return refuse(EXIT_DEVICE, str(exc))
     try:                          # reachable at all? (a port that is open but silent: exit 3)
         Printer(dev).connect()
     except LinkError as exc:
-        print(f"wideprint print: {exc}", file=sys.stderr)
         _close_device(dev, args)
-        return EXIT_DEVICE
-    reports, failed = [], 0
+        if scratch:
+            scratch.cleanup()
+        return refuse(EXIT_DEVICE, str(exc))
+    failed = 0
     say = sys.stderr if args.json else sys.stdout     # --json keeps stdout machine-readable
     log_json = open(args.log_json, "a") if args.log_json else None
     current: dict = {}
+    base = cli_job_base()
 
     def interrupt(signum, frame):
         """First Ctrl-C: cancel (the line stops, the carriage parks); second: emergency stop."""
@@ -159,19 +299,36 @@ def cmd_print(args) -> int:
             print("\ncancelling (Ctrl-C again for an emergency stop)", file=sys.stderr)
             job.control.cancel()
     signal.signal(signal.SIGINT, interrupt)
+
+    def job_failed(f: str, message: str, rep: dict | None = None, what: str = "FAILED") -> dict:
+        rep = dict(rep or {}, file=f, state="cancelled" if what == "CANCELLED" else "failed",
+                   message=message)
+        said = shown(message)
+        if message.startswith(f + ": "):           # the loader's "NAME: problem"
+            said = f"{shown(f, NAME_LIMIT)}: {shown(message[len(f) + 2:])}"
+        print(f"{shown(f, NAME_LIMIT)}: {what}: {said}", file=sys.stderr)
+        return rep
+
     try:
         for i, f in enumerate(files):
-            media[i + 1] = _media_path(args.media_out, i, len(files))
+            job_id = base + i
+            media_file = _media_path(args.media_out, i, len(files))
+            if media_file is None and scratch is not None:    # --preview alone: drawn from this
+                media_file = os.path.join(scratch.name, f"media-{i + 1}.tif")
+            media[job_id] = media_file
+            if f in unlisted:
+                failed += 1
+                reports.append(job_failed(f, unlisted[f], dict(job_id=job_id)))
+                continue
             try:
                 rip = RipJob(f, settings, profile)
             except (ImageError, ValueError, OSError) as exc:
                 failed += 1
-                reports.append(dict(file=f, state="failed", message=str(exc)))
-                print(f"{f}: FAILED: {exc}", file=sys.stderr)
+                reports.append(job_failed(f, str(exc), dict(job_id=job_id)))
                 continue
-            label = f"{i + 1}/{len(files)} {Path(f).name}"
+            label = f"{i + 1}/{len(files)} {shown(Path(f).name, 60)}"
 
-            def on_event(kind, label=label, job_id=i + 1, file=f, **kw):
+            def on_event(kind, label=label, job_id=job_id, file=f, **kw):
                 if kind == "stroke":                    # a progress bar on a terminal
                     progress(kw["index"], kw["total"],
                              f"{label} stroke {kw['index'] + 1} of {kw['total']}")
@@ -183,47 +340,69 @@ def cmd_print(args) -> int:
                                                "file": file, "event": kind, **data},
                                               default=str) + "\n")
                     log_json.flush()
-            job = PrintJob(dev, rip, job_id=i + 1, on_event=on_event)
+            job = PrintJob(dev, rip, job_id=job_id, on_event=on_event)
             current["job"] = job
             try:
                 rep = job.run().as_dict()
+                rep["job_id"] = job_id
                 progress(1, 1, f"{label} done", final=True)
-                rep["media"] = media[i + 1]
-                if args.preview and rep["media"]:
-                    from ..rip.planes import write_preview
-                    write_preview(rep["media"], _media_path(args.preview, i, len(files)))
+                rep["media"] = media_file if args.media_out else None
                 if dev.emulator is not None:
-                    stats = dev.emulator.jobs_done.get(i + 1, {})
+                    stats = dev.emulator.jobs_done.get(job_id, {})
                     rep["stray_drops"] = stats.get("stray")
-                print(f"{f}: printed {rep['strokes_printed']} strokes, "
+                print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
-                      + (f" -> {rep['media']}" if rep["media"] else ""), file=say)
+                      + (f" -> {shown(rep['media'])}" if rep["media"] else ""), file=say)
+                if args.preview:
+                    from ..rip.planes import write_preview
+                    preview = _media_path(args.preview, i, len(files))
+                    try:
+                        write_preview(media_file, preview)
+                        rep["preview"] = preview
+                    except (OSError, ValueError) as exc:
+                        failed += 1             # printed, but an output asked for is missing
+                        why = f"{exc.strerror} ({preview})" if getattr(exc, "strerror", None) \
+                            else str(exc)
+                        rep["preview_error"] = why
+                        print(f"{shown(f, NAME_LIMIT)}: preview not written: {shown(why)}",
+                              file=sys.stderr)
+                    finally:
+                        if not args.media_out:
+                            with contextlib.suppress(OSError):
+                                os.unlink(media_file)
             except JobCancelled as exc:
                 progress(0, 1, "", final=True)
                 failed += 1
-                rep = job.report.as_dict()
-                print(f"{f}: CANCELLED: {exc}", file=sys.stderr)
-                reports.append(rep)
+                reports.append(job_failed(f, str(exc), dict(job.report.as_dict(), job_id=job_id),
+                                          "CANCELLED"))
                 break
-            except (JobError, ImageError) as exc:
+            except (JobError, ImageError, ValueError, OSError) as exc:
+                # ValueError/OSError: the RIP refused this file midway (e.g. an ICC profile
+                # for another colour space); the next files still print
                 progress(0, 1, f"{label} failed", final=True)
                 failed += 1
-                rep = job.report.as_dict()
-                rep["state"], rep["message"] = "failed", str(exc)
-                print(f"{f}: FAILED: {exc}", file=sys.stderr)
+                rep = job_failed(f, str(exc), dict(job.report.as_dict(), job_id=job_id))
+            except Exception as exc:  # noqa: BLE001 - one job's bug must not lose the batch
+                progress(0, 1, f"{label} failed", final=True)
+                failed += 1
+                rep = job_failed(f, f"internal error: {type(exc).__name__}: {exc}",
+                                 dict(job.report.as_dict(), job_id=job_id))
+            finally:
+                rip.close()
             reports.append(rep)
     finally:
-        _close_device(dev, args)
-        if log_json is not None:
-            log_json.close()
-    if args.report:
-        Path(args.report).write_text(json.dumps(reports, indent=2) + "\n")
-    if args.json:
-        print(json.dumps(reports, indent=2))
+        try:
+            _close_device(dev, args)
+        finally:
+            if log_json is not None:
+                log_json.close()
+            if scratch is not None:
+                scratch.cleanup()
+    code = finish(EXIT_JOB_FAILED if failed else EXIT_OK)
     done = sum(1 for r in reports if r.get("state") == "done")
     print(f"summary: {done} of {len(files)} printed, {failed} failed", file=say)
-    return EXIT_JOB_FAILED if failed else EXIT_OK
+    return code
 
 
 def cmd_test_print(args) -> int:

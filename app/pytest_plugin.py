@@ -142,10 +142,9 @@ def assert_media_equals_planes(result: api.PrintResult, planes=None, *, name: st
         if not result.ok:
             pytest.fail(f"{result.file}: the job {result.state}: {result.message}")
         rep = result.report
-        total, printed = rep.get("strokes_total", rep.get("passes_total")), \
-            rep.get("strokes_printed", rep.get("passes_printed"))
-        if total is not None and printed is not None and printed + rep.get(
-                "strokes_skipped", rep.get("passes_skipped", 0)) != total:
+        total, printed = rep.get("strokes_total"), rep.get("strokes_printed")
+        if total is not None and printed is not None and \
+                printed + rep.get("strokes_skipped", 0) != total:
             pytest.fail(f"{result.file}: the printer reported {printed} of {total} strokes")
         return
     planes = result.planes if planes is None else planes

@@ -202,6 +202,65 @@ def _fail(cmd: str, exc: Exception) -> int:
     return EXIT_FAILED
 
 
+def _printer_configs(args) -> list:
+    """--printer NAME=SPEC (repeated) and --printer-profile NAME=TOML; none: one printer,
+    "main", with --device and --profile."""
+    from .server.config import PrinterConfig
+    if not args.printer:
+        if args.printer_profile:
+            raise ValueError("--printer-profile goes with --printer")
+        return []
+    profiles = {}
+    for item in args.printer_profile or []:
+        name, eq, path = item.partition("=")
+        if not eq or not name or not path:
+            raise ValueError(f"--printer-profile {item!r}: expected NAME=TOML")
+        profiles[name] = path
+    out = []
+    for item in args.printer:
+        name, eq, spec = item.partition("=")
+        if not eq or not name or not spec:
+            raise ValueError(f"--printer {item!r}: expected NAME=SPEC (e.g. plotter1=emulator)")
+        out.append(PrinterConfig(name, spec, profiles.pop(name, args.profile)))
+    if profiles:
+        raise ValueError(f"--printer-profile for no printer: {', '.join(profiles)}")
+    return out
+
+
+def cmd_clear_fault(args) -> int:
+    try:
+        client = _client(args)
+        printer = args.printer or client.status()["printers"][0]["name"]
+        r = client.request("POST", f"/v1/printers/{printer}/clear-fault",
+                           body={"then": "fail" if args.fail else "resume"})
+    except ApiError as exc:
+        return _fail("clear-fault", exc)
+    jobs = ", ".join(str(j) for j in r["jobs"]) or "no job was stopped"
+    print(f"printer {r['printer']}: fault cleared; {jobs}"
+          + (f" {'resumes' if r['then'] == 'resume' else 'failed'}" if r["jobs"] else ""))
+    return EXIT_OK
+
+
+def cmd_move(args) -> int:
+    try:
+        job = _client(args).request("POST", f"/v1/jobs/{args.id}/move",
+                                    body={"printer": args.printer})["job"]
+    except ApiError as exc:
+        return _fail("move", exc)
+    print(f"job {job['id']}: printer {job['printer'] or 'any'}")
+    return EXIT_OK
+
+
+def cmd_estop(args) -> int:
+    try:
+        r = _client(args).request("POST", "/v1/estop", body={})
+    except ApiError as exc:
+        return _fail("estop", exc)
+    print("emergency stop: " + (", ".join(r["stopped"]) or "nothing was printing") +
+          "; every printer paused")
+    return EXIT_OK
+
+
 def cmd_serve(args) -> int:
     import logging
     from .server import ServerConfig, default_state_dir, serve
@@ -223,6 +282,12 @@ def cmd_serve(args) -> int:
                        scan_interval=args.scan_interval, start_paused=args.paused,
                        profile_path=args.profile, settle_s=args.settle_time,
                        api_timeout_s=args.api_timeout, api_max_connections=args.api_connections)
+    try:
+        cfg.printers = _printer_configs(args)
+        cfg.printer_configs()                    # names checked before anything starts
+    except ValueError as exc:
+        print(f"wideprint serve: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     if args.max_file_size is not None:
         cfg.max_file_bytes = args.max_file_size
     if args.keep_failed is not None:
@@ -266,7 +331,7 @@ def cmd_submit(args) -> int:
         try:
             r = client.submit(f, preset=args.preset, copies=args.copies, priority=args.priority,
                               hold=args.hold or None, settings=_settings_from(args) or None,
-                              client=args.client)
+                              client=args.client, printer=args.printer)
             job = r["job"]
             results.append(job)
             if not args.json:
@@ -362,7 +427,13 @@ def cmd_status(args) -> int:
     s, q, p, cur = st["server"], st["queue"], st["printer"], st["current"]
     print(f"server   {s['url']}  pid {s['pid']}  up {time.time() - s['started']:.0f} s  "
           f"device {s['device']}  on crash: {s['on_crash']}")
-    print(f"printer  {p['state']}" + (f": {p['error']}" if p["error"] else ""))
+    for pr in st.get("printers") or [dict(name="main", state=p["state"], error=p["error"],
+                                           paused=q["paused"], reason=q["reason"], current=cur)]:
+        pc = pr["current"]
+        print(f"printer  {pr['name']}: {pr['state']}" + (f": {pr['error']}" if pr["error"] else "")
+              + (f"  [paused: {pr['reason']}]" if pr["paused"] else "")
+              + (f"  job {pc['id']} {pc['name']} stroke {pc['strokes_printed']}/{pc['strokes_total']}"
+                 if pc else ""))
     counts = ", ".join(f"{k} {v}" for k, v in q["counts"].items())
     print(f"queue    {'PAUSED (' + q['reason'] + ')' if q['paused'] else 'running'}; {counts}")
     pr = st.get("presets")
@@ -484,6 +555,12 @@ def add_parser(sub) -> None:
     p.add_argument("--paused", action="store_true",
                    help="start with the queue paused (jobs are accepted, none printed)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
+    p.add_argument("--printer", action="append", metavar="NAME=SPEC",
+                   help="a printer of this server (repeat for several, e.g. --printer "
+                        "left=serial=/dev/ttyS0,data=usb://1209:5750 --printer right=...); "
+                        "default: one printer, 'main', on --device")
+    p.add_argument("--printer-profile", action="append", metavar="NAME=TOML",
+                   help="that printer's profile (default: --profile)")
     p.add_argument("--verbose-server", action="store_true", help="debug logging")
     p.set_defaults(func=cmd_serve)
 
@@ -494,6 +571,8 @@ def add_parser(sub) -> None:
     p.add_argument("--priority", type=int, help="-100..100, higher prints first (default 0)")
     p.add_argument("--hold", action="store_true", help="queue the job held")
     p.add_argument("--client", help="a tag for the accounting (default: none)")
+    p.add_argument("--printer", metavar="NAME", help="the printer to print on (default: any, the "
+                   "first free one)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--wait", type=float, nargs="?", const=3600.0, metavar="S",
                    help="wait until the jobs have printed (exit 1 if any did not)")
@@ -534,6 +613,20 @@ def add_parser(sub) -> None:
     p.add_argument("--json", action="store_true")
     p.add_argument("--job", type=int, metavar="ID")
     p.set_defaults(func=cmd_report)
+
+    p = _client_parser(sub, "clear-fault", "a printer's fault cleared: its stopped job resumes "
+                       "at its first unfinished stroke (or fails), its queue runs again")
+    p.add_argument("printer", nargs="?", metavar="PRINTER", help="default: the first printer")
+    p.add_argument("--fail", action="store_true", help="fail the stopped job instead of resuming it")
+    p.set_defaults(func=cmd_clear_fault)
+
+    p = _client_parser(sub, "move", "move a job not yet started to another printer")
+    p.add_argument("id", type=int, metavar="ID")
+    p.add_argument("printer", metavar="PRINTER", help="a printer's name, or any")
+    p.set_defaults(func=cmd_move)
+
+    p = _client_parser(sub, "estop", "emergency stop: every printing printer stops at once")
+    p.set_defaults(func=cmd_estop)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import struct
 from dataclasses import dataclass, field
 from typing import Any, Iterator
@@ -407,6 +408,7 @@ class _BmpInfo:
     yres: float | None
     icc: bytes | None
     data_size: int
+    colors: int = 0  # palette entries in the file (bpp <= 8)
 
 
 def _bmp_header(path: str, f, size: int) -> _BmpInfo:
@@ -471,13 +473,16 @@ def _bmp_header(path: str, f, size: int) -> _BmpInfo:
     grey = False
     if bpp <= 8:
         n = clrused if 0 < clrused <= (1 << bpp) else (1 << bpp)
+        room = (off_bits - after) // pal_entry
+        if 0 < room < n:  # the pixel data starts sooner: the palette is shorter than 2^bpp
+            n = room
         f.seek(after)
         raw = f.read(n * pal_entry)
         n = len(raw) // pal_entry
         if n == 0:
             raise ImageError(path, "corrupt BMP: missing colour palette")
         p = np.frombuffer(raw[: n * pal_entry], np.uint8).reshape(n, pal_entry)[:, 2::-1]
-        palette = np.zeros((256, 3), np.uint8)  # indices past the palette print black, like other decoders
+        palette = np.zeros((256, 3), np.uint8)  # indices past the palette are refused (_BmpReader)
         palette[:n] = p
         grey = bool(np.all(p[:, 0] == p[:, 1]) and np.all(p[:, 1] == p[:, 2]))
     if compression in (1, 2) and top_down:
@@ -494,7 +499,7 @@ def _bmp_header(path: str, f, size: int) -> _BmpInfo:
     if xres is None or yres is None:
         xres = yres = None
     return _BmpInfo(w, h, top_down, bpp, compression, off_bits, stride, palette, grey, masks, xres, yres, icc,
-                    sizeimage)
+                    sizeimage, 0 if palette is None else n)
 
 
 def _mask_shift_bits(m: int) -> tuple[int, int]:
@@ -520,9 +525,12 @@ def _rle_decoder():
         nb = _numba()
 
         @nb.njit(cache=True, nogil=True)
-        def decode(data, width, height, rle4, out):
+        def decode(data, width, padded, height, rle4, colors, out, where):
             """RLE8/RLE4 into ``out`` (height, width) uint8, rows in file order (bottom-up).
-            Returns 0 ok, 1 data ends early, 2 bad delta / position outside the image."""
+            A run may cover the row's padding (`padded` pixels: encoders such as ImageMagick
+            encode it), never more.  Returns 0 ok, 1 data ends early, 2 bad delta / position
+            outside the image, 3 a run overruns its row, 4 a colour index past the palette;
+            `where` gets (byte of the code in `data`, x, y, count or index) of the problem."""
             n = data.shape[0]
             x = 0
             y = 0
@@ -531,17 +539,23 @@ def _rle_decoder():
                 if y >= height:
                     return 0
                 if i + 1 >= n:
+                    where[0], where[1], where[2], where[3] = i, x, y, 0
                     return 1
                 count = data[i]
                 val = data[i + 1]
+                at = i
                 i += 2
                 if count > 0:  # encoded run
+                    where[0], where[1], where[2], where[3] = at, x, y, count
+                    if x + count > padded:
+                        return 3
                     for t in range(count):
-                        if x < width:
-                            if rle4:
-                                out[y, x] = (val >> 4) if (t & 1) == 0 else (val & 15)
-                            else:
-                                out[y, x] = val
+                        v = ((val >> 4) if (t & 1) == 0 else (val & 15)) if rle4 else val
+                        if x < width:               # not the padding
+                            if v >= colors:
+                                where[1], where[3] = x, v
+                                return 4
+                            out[y, x] = v
                         x += 1
                 elif val == 0:  # end of line
                     x = 0
@@ -550,24 +564,32 @@ def _rle_decoder():
                     return 0
                 elif val == 2:  # delta
                     if i + 1 >= n:
+                        where[0], where[1], where[2], where[3] = at, x, y, 0
                         return 1
                     x += data[i]
                     y += data[i + 1]
                     i += 2
-                    if y > height or (y == height and x > 0):
+                    if x > padded or y > height or (y == height and x > 0):
+                        where[0], where[1], where[2], where[3] = at, x, y, 0
                         return 2
                 else:  # absolute run of `val` pixels
                     cnt = val
                     nbytes = (cnt + 1) // 2 if rle4 else cnt
+                    where[0], where[1], where[2], where[3] = at, x, y, cnt
                     if i + nbytes > n:
                         return 1
+                    if x + cnt > padded:
+                        return 3
                     for t in range(cnt):
                         if rle4:
                             b = data[i + (t >> 1)]
                             v = (b >> 4) if (t & 1) == 0 else (b & 15)
                         else:
                             v = data[i + t]
-                        if x < width and y < height:
+                        if x < width:               # not the padding
+                            if v >= colors:
+                                where[0], where[1], where[3] = i + ((t >> 1) if rle4 else t), x, v
+                                return 4
                             out[y, x] = v
                         x += 1
                     i += nbytes + (nbytes & 1)  # padded to 16 bits
@@ -588,11 +610,27 @@ class _BmpReader:
             f.seek(info.offset)
             data = np.frombuffer(f.read(), np.uint8)
         plane = np.zeros((info.height, info.width), np.uint8)
-        status = _rle_decoder()(data, info.width, info.height, info.compression == 2, plane)
+        where = np.zeros(4, np.int64)
+        padded = info.stride * 8 // info.bpp          # pixels in a row with its padding
+        status = _rle_decoder()(data, info.width, padded, info.height, info.compression == 2, info.colors,
+                                plane, where)
+        at, x, y, val = (int(v) for v in where)
+        at += info.offset                  # a byte offset in the file
+        row = info.height - 1 - y          # rows are stored bottom-up; say them from the top
         if status == 1:
-            raise ImageError(self.path, "truncated BMP: the RLE data ends before the end of the image")
+            raise ImageError(self.path, f"truncated BMP: the RLE data ends before the end of the image "
+                                        f"(at byte {at}, row {row} of {info.height})")
         if status == 2:
-            raise ImageError(self.path, "corrupt BMP: RLE data moves outside the image")
+            edge = "right edge" if x > info.width else "top"
+            raise ImageError(self.path, f"corrupt BMP: RLE data moves outside the image (the delta at byte {at} "
+                                        f"moves past the {edge} of the {info.width} x {info.height} image)")
+        if status == 3:
+            raise ImageError(self.path, f"corrupt BMP: the RLE run of {val} pixels at byte {at} overruns row {row} "
+                                        f"(it starts at column {x}, the image is {info.width} wide, "
+                                        f"{padded} with the row's padding)")
+        if status == 4:
+            raise ImageError(self.path, f"corrupt BMP: colour index {val} at byte {at} (row {row}, column {x}) "
+                                        f"is outside the palette of {info.colors} colours")
         return plane
 
     def _pixels(self, idx_or_raw: np.ndarray) -> np.ndarray:
@@ -603,13 +641,27 @@ class _BmpReader:
             return info.palette[idx_or_raw]
         return idx_or_raw
 
-    def _decode_rows(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """raw (n, stride) uint8 in top-to-bottom order -> (pixels (n, w, c) uint8, alpha (n, w) or None)."""
+    def _check_indices(self, idx: np.ndarray, y0: int) -> None:
+        """Refuse a colour index past the palette (a corrupt file, not black ink)."""
+        info = self.info
+        if info.colors >= (1 << info.bpp) or int(idx.max(initial=0)) < info.colors:
+            return
+        r, x = (int(v) for v in np.argwhere(idx >= info.colors)[0])
+        row = y0 + r
+        frow = row if info.top_down else info.height - 1 - row
+        at = info.offset + frow * info.stride + x * info.bpp // 8
+        raise ImageError(self.path, f"corrupt BMP: colour index {int(idx[r, x])} at byte {at} (row {row}, column {x}) "
+                                    f"is outside the palette of {info.colors} colours")
+
+    def _decode_rows(self, raw: np.ndarray, y0: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+        """raw (n, stride) uint8 in top-to-bottom order (image row y0 first) -> (pixels (n, w, c) uint8,
+        alpha (n, w) or None)."""
         info = self.info
         w = info.width
         n = raw.shape[0]
         bpp = info.bpp
         if bpp == 8:
+            self._check_indices(raw[:, :w], y0)
             return self._pixels(raw[:, :w]), None
         if bpp in (1, 2, 4):
             if bpp == 1:
@@ -626,6 +678,7 @@ class _BmpReader:
                 for k in range(4):
                     idx[:, k::4] = (b >> (6 - 2 * k)) & 3
                 idx = idx[:, :w]
+            self._check_indices(idx, y0)
             return self._pixels(idx), None
         if bpp == 24:
             return np.ascontiguousarray(raw[:, : w * 3].reshape(n, w, 3)[..., ::-1]), None
@@ -685,7 +738,7 @@ class _BmpReader:
                 raw = np.frombuffer(buf, np.uint8).reshape(n, stride)
                 if not info.top_down:
                     raw = raw[::-1]
-                px, alpha = self._decode_rows(raw)
+                px, alpha = self._decode_rows(raw, y)
                 if alpha is not None:
                     px = _composite_white_u8(px, alpha)
                 yield np.ascontiguousarray(px)
@@ -759,6 +812,14 @@ def _libvips_cmyk_jpeg_inversion() -> tuple[bool, bool]:
     return _JPEG_CMYK_PROBE
 
 
+def _utf8(path: str) -> bool:
+    try:
+        path.encode("utf-8")
+        return True
+    except UnicodeEncodeError:      # surrogate-escaped bytes of a non-UTF-8 name
+        return False
+
+
 class _VipsReader:
     def __init__(self, path: str, fmt: str, plan: _VipsPlan):
         self.path = path
@@ -771,7 +832,16 @@ class _VipsReader:
         kw: dict[str, Any] = dict(access="sequential", fail_on=fail_on)
         if revalidate:
             kw["revalidate"] = True
-        return pv.Image.new_from_file(self.path, **kw)
+        if _utf8(self.path):
+            return pv.Image.new_from_file(self.path, **kw)
+        # libvips takes UTF-8 file names only: a name with other bytes is opened here and
+        # handed over as a descriptor (the source keeps its own copy of it)
+        fd = os.open(self.path, os.O_RDONLY | os.O_CLOEXEC)
+        try:
+            source = pv.Source.new_from_descriptor(fd)
+        finally:
+            os.close(fd)
+        return pv.Image.new_from_source(source, "", **kw)
 
     def pipeline(self, img):
         p = self.plan
@@ -940,26 +1010,47 @@ class ImageSource:
         self.close()
 
 
+def _not_regular(mode: int) -> str | None:
+    """Why a file that is not a regular file cannot be an image (None for a regular one)."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a directory, not an image file"
+    kind = ("a FIFO" if stat.S_ISFIFO(mode) else "a character device" if stat.S_ISCHR(mode)
+            else "a block device" if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "not a file")
+    return f"not a regular file ({kind}), not an image file"
+
+
 def open_image(path, *, max_pixels: int = 4_000_000_000, max_side: int = 1_000_000) -> ImageSource:
     """Read and check the header only; refuse absurd dimensions before decoding anything."""
     path = os.fspath(path)
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    # opened without blocking, then checked on the descriptor: a FIFO must not hang us
+    # and the file checked is the file read
     try:
-        st = os.stat(path)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except FileNotFoundError:
         raise ImageError(path, "file not found") from None
     except OSError as e:
         raise ImageError(path, f"cannot read file: {e.strerror or e}") from None
-    if os.path.isdir(path):
-        raise ImageError(path, "is a directory, not an image file")
-    size = st.st_size
-    if size == 0:
-        raise ImageError(path, "empty file (0 bytes)")
     try:
-        f = open(path, "rb")
-    except OSError as e:
-        raise ImageError(path, f"cannot read file: {e.strerror or e}") from None
+        st = os.fstat(fd)
+        kind = _not_regular(st.st_mode)
+        if kind:
+            raise ImageError(path, kind)
+        os.set_blocking(fd, True)
+        f = os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+    size = st.st_size
+    fmt = None
     try:
         with f:
+            if size == 0:
+                raise ImageError(path, "empty file (0 bytes)")
             head = f.read(64)
             fmt = _sniff(head)
             if fmt is None:
@@ -1020,6 +1111,8 @@ def _open_vips(path: str, fmt: str, hdr: _Hdr, max_pixels: int, max_side: int) -
         img = reader.open()
     except pv.Error as e:
         raise ImageError(path, _vips_problem(fmt, str(e), path)) from None
+    except OSError as e:
+        raise ImageError(path, f"cannot read file: {e.strerror or e}") from None
     # libvips' own view of the size must agree with the limits too (e.g. multi-page quirks)
     _check_dims(path, img.width, img.height, max_pixels, max_side)
     plan = _vips_plan(path, fmt, img, hdr)

@@ -356,7 +356,76 @@ def write_corpus(d) -> list[Case]:
         "corrupt BMP: RLE data moves outside the image")
     add("bmp_bad_planes.bmp", bmp_bytes(width=8, height=8, bpp=24, pixel_data=b"\x00" * 192, planes=3),
         "corrupt BMP")
+
+    # --- BMP: RLE runs that do not fit their row, colour indices past the palette (a
+    # decoder that clips or paints them black prints a wrong image with exit 0) ---
+    # 6 x 4, rows bottom-up in the file, 8 pixels a row with the padding (runs may cover
+    # it); the pixel data starts after 14 + 40 + 4 * len(palette) bytes
+    six = np.zeros((4, 6), np.uint8)
+    add("rle8_run_overruns_row.bmp", bmp_rle(six, pal, False, data=bytes([4, 1, 5, 2, 0, 0, 0, 1])),
+        "corrupt BMP: the RLE run of 5 pixels at byte 1080 overruns row 3 (it starts at column 4, "
+        "the image is 6 wide, 8 with the row's padding)")
+    add("rle8_absolute_overruns_row.bmp",
+        bmp_rle(six, pal, False, data=bytes([0, 10, *range(1, 11), 0, 1])),
+        "corrupt BMP: the RLE run of 10 pixels at byte 1078 overruns row 3")
+    pal16 = pal[:16]
+    add("rle4_run_overruns_row.bmp", bmp_rle(six, pal16, True, data=bytes([9, 0x12, 0, 1])),
+        "corrupt BMP: the RLE run of 9 pixels at byte 118 overruns row 3")
+    add("rle8_no_end_of_line.bmp",                 # a full row, then the next run without EOL
+        bmp_rle(six, pal, False, data=bytes([6, 1, 3, 2, 0, 0, 0, 1])),
+        "overruns row 3 (it starts at column 6")
+    add("rle8_delta_past_right_edge.bmp", bmp_rle(six, pal, False, data=bytes([2, 1, 0, 2, 9, 0, 0, 1])),
+        "corrupt BMP: RLE data moves outside the image (the delta at byte 1080 moves past the right edge")
+    add("rle8_index_past_palette.bmp", bmp_rle(six, pal[:4], False, data=bytes([2, 1, 3, 9, 0, 1])),
+        "corrupt BMP: colour index 9 at byte 72 (row 3, column 2) is outside the palette of 4 colours")
+    add("rle4_index_past_palette.bmp",
+        bmp_rle(six, pal[:3], True, data=bytes([0, 4, 0x12, 0x0F, 0, 1])),
+        "corrupt BMP: colour index 15 at byte 69 (row 3, column 3) is outside the palette of 3 colours")
+    idx8 = np.zeros((5, 7), np.uint8)
+    idx8[1, 4] = 200                               # image row 1 is file row 3 (bottom-up)
+    add("bmp8_index_past_palette.bmp", bmp_indexed(idx8, pal[:16], 8),
+        "corrupt BMP: colour index 200 at byte 146 (row 1, column 4) is outside the palette of 16 colours")
+    idx4 = np.zeros((3, 5), np.uint8)
+    idx4[2, 1] = 5
+    add("bmp4_index_past_palette.bmp", bmp_indexed(idx4, pal[:2], 4, top_down=True),
+        "corrupt BMP: colour index 5 at byte 70 (row 2, column 1) is outside the palette of 2 colours")
+
+    # --- not regular files: a FIFO or a device is no image (and must not hang the reader) ---
+    fifo = d / "a_fifo.tif"
+    if not fifo.exists():
+        os.mkfifo(fifo)
+    add("a_fifo.tif", None, "not a regular file (a FIFO)")
+    link = d / "link_to_fifo.jpg"
+    if not link.is_symlink():
+        link.symlink_to(fifo.name)
+    add("link_to_fifo.jpg", None, "not a regular file (a FIFO)")
+    add("dev_zero", None, "not a regular file (a character device)", path=Path("/dev/zero"))
+    add("dev_null", None, "not a regular file (a character device)", path=Path("/dev/null"))
+
+    # --- names: longer than NAME_MAX / PATH_MAX; not UTF-8 ---
+    add("name_max", None, "cannot read file: File name too long", path=d / ("n" * 300 + ".tif"))
+    add("path_max", None, "cannot read file: File name too long",
+        path=d.joinpath(*["p" * 200] * 25, "deep.tif"))
+    add("non_utf8_truncated.jpg", jpg[: len(jpg) * 6 // 10], "truncated JPEG",
+        path=d / os.fsdecode(b"caf\xe9-\xff.jpg"))
+
+    # --- a header claiming a huge image (under the pixel cap) with a few KB of data ---
+    add("jpeg_claims_huge.jpg", set_jpeg_size(jpg, 30000, 20000), "corrupt JPEG data")
     return cases
+
+
+def set_jpeg_size(jpeg: bytes, width: int, height: int) -> bytes:
+    """The same JPEG data under a frame header claiming another size."""
+    pos = 2
+    b = bytearray(jpeg)
+    while pos < len(b):
+        marker = b[pos + 1]
+        (length,) = struct.unpack(">H", b[pos + 2: pos + 4])
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            struct.pack_into(">HH", b, pos + 5, height, width)
+            return bytes(b)
+        pos += 2 + length
+    raise ValueError("no SOF")
 
 
 def mutations(data: bytes, n: int, seed: int) -> list[bytes]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import pickle
 import subprocess
 import sys
@@ -440,6 +441,60 @@ def test_bmp_rle_delta_and_early_eol(tmp_path):
     exp_idx[1, 2:4] = 2
     np.testing.assert_array_equal(arr, COLOUR_PAL[exp_idx])
     np.testing.assert_array_equal(arr, _cv2_rgb(p))
+
+
+def test_bmp_rle_runs_may_cover_the_row_padding(tmp_path):
+    """ImageMagick encodes each RLE8 row padded to 4 bytes (a 5 px row: 5 pixels and a run of
+    3 zeros): the padding is dropped, only a run past it is an error."""
+    data = bytes([3, 1, 2, 2, 3, 0, 0, 0,      # row 0: 1 1 1 2 2 + 3 padding pixels
+                  0, 5, 4, 5, 6, 7, 8, 0, 0, 0,   # row 1: absolute 4..8 (padded to 16 bits) + EOL
+                  0, 1])
+    p = tmp_path / "im.bmp"
+    p.write_bytes(bmp_rle(np.zeros((2, 5), np.uint8), COLOUR_PAL, False, data=data))
+    _, arr = read_all(p)
+    np.testing.assert_array_equal(arr, COLOUR_PAL[np.array([[4, 5, 6, 7, 8], [1, 1, 1, 2, 2]])])
+    p.write_bytes(bmp_rle(np.zeros((2, 5), np.uint8), COLOUR_PAL, False,
+                          data=bytes([3, 1, 2, 2, 4, 0, 0, 1])))
+    with pytest.raises(ImageError, match="the RLE run of 4 pixels at byte 1082 overruns row 1 "
+                                         r"\(it starts at column 5, the image is 5 wide, 8 with"):
+        read_all(p)
+
+
+def test_bmp_palette_ends_where_the_pixels_start(tmp_path):
+    """No colour count in the header (2^bpp), but only 16 entries before the pixel data: the
+    palette is those 16, not 256 entries of which 240 are pixels."""
+    idx = (np.arange(6 * 7).reshape(6, 7) % 16).astype(np.uint8)
+    data = bytearray(bmp_indexed(idx, COLOUR_PAL[:16], 8))
+    data[46:50] = bytes(4)                         # biClrUsed = 0
+    p = tmp_path / "short_palette.bmp"
+    p.write_bytes(bytes(data))
+    _, arr = read_all(p)
+    np.testing.assert_array_equal(arr, COLOUR_PAL[idx])
+    idx[2, 3] = 20
+    data = bytearray(bmp_indexed(idx, COLOUR_PAL[:16], 8))
+    data[46:50] = bytes(4)
+    p.write_bytes(bytes(data))
+    with pytest.raises(ImageError, match=r"colour index 20 at byte \d+ \(row 2, column 3\) is outside "
+                                         "the palette of 16 colours"):
+        read_all(p)
+
+
+@pytest.mark.parametrize("kind", ["tif", "jpg", "png", "bmp", "rle"])
+def test_non_utf8_file_names_decode_the_same(tmp_path, kind):
+    """A name that is not UTF-8 (Latin-1 bytes, as an old share or camera writes them) is a
+    valid file: libvips gets it as a descriptor, the pixels are the same."""
+    samples = _valid_samples(tmp_path)
+    data = samples[kind]
+    plain = tmp_path / f"plain.{kind}"
+    plain.write_bytes(data)
+    odd = tmp_path / os.fsdecode(b"caf\xe9-\xff\x80." + kind.encode())
+    odd.write_bytes(data)
+    _, want = read_all(plain)
+    src, got = read_all(odd)
+    assert src.path == str(odd)
+    np.testing.assert_array_equal(got, want)
+    _, got_b = read_all(os.fsencode(odd))          # a bytes path too
+    np.testing.assert_array_equal(got_b, want)
 
 
 def test_bmp_written_by_opencv(tmp_path):

@@ -614,36 +614,70 @@ def test_requeue_a_cancelled_job_prints_it_again_bit_exact(srv, client, tmp_path
     assert e.value.status == 409 and f"job {jid} is done" in str(e.value)
 
 
-def test_requeue_a_job_failed_by_a_printer_fault(srv, client, tmp_path):
-    """The paper runs out mid-job: the job fails and the queue pauses; the operator loads
-    paper, clears the fault, requeues the job and resumes: it prints whole."""
-    planes = random_planes(300, 200, seed=29)
-    src = write_cmyk_tiff(tmp_path / "roll.tif", planes)
-    job = client.submit(src, settings={"passes": 4})["job"]
-    jid = job["id"]
-    wait_for(lambda: client.job(jid)["strokes_done"] >= 1, 30, poll=0.005, what="the first stroke")
+def _wait_state(client, job_id, states, timeout=60):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        job = client.job(job_id)
+        if job["state"] in states:
+            return job
+        time.sleep(0.02)
+    raise AssertionError(f"job {job_id} never reached {states}: {job}")
+
+
+def test_a_printer_fault_stops_the_printer_not_the_queue(srv, client, tmp_path):
+    """The paper runs out in job 1 of 3: job 1 is held with the fault and its checkpoint,
+    jobs 2 and 3 stay queued (nothing fails); the operator loads paper and clears the fault:
+    job 1 resumes at its first unfinished stroke and all three print bit-exact."""
+    client.pause_queue(True)
+    planes = [random_planes(300, 200, seed=29 + i) for i in range(3)]
+    ids = [client.submit(write_cmyk_tiff(tmp_path / f"roll{i}.tif", p),
+                         settings={"passes": 4})["job"]["id"] for i, p in enumerate(planes)]
+    client.pause_queue(False)
+    wait_for(lambda: client.job(ids[0])["strokes_done"] >= 1, 30, poll=0.005, what="the first stroke")
     emu = srv.worker.dev.emulator
     emu.paper_left_steps = 1                         # the roll ends at the next feed
-    failed = client.wait(jid, 60)
+    stopped = _wait_state(client, ids[0], ("held", "failed", "done"))
     try:
-        assert failed["state"] == "failed" and "paper out" in failed["message"], failed
-        assert client.status()["queue"]["paused"] is True
-        emu.paper_left_steps = None                  # a new roll...
-        emu.clear_fault()                            # ...and the fault cleared on the panel
-        job = client.action(jid, "requeue")
-        assert (job["state"], job["attempt"], job["message"], job["strokes_done"]) == \
-            ("queued", 2, "", 0)
+        assert stopped["state"] == "held" and "paper out" in stopped["fault"], stopped
         time.sleep(0.3)
-        assert client.job(jid)["state"] == "queued"  # the queue stays paused until resumed
+        assert [client.job(i)["state"] for i in ids[1:]] == ["queued", "queued"]
+        st = client.status()
+        printer = st["printers"][0]
+        assert printer["state"] == "fault" and "paper out" in printer["fault"] and printer["paused"]
+        with pytest.raises(ApiError) as e:                   # release is not the way out
+            client.action(ids[0], "release")
+        assert e.value.status == 409 and "clear the fault" in str(e.value)
+        emu.paper_left_steps = None                      # a new roll ...
+        r = client.request("POST", "/v1/printers/main/clear-fault", body={"then": "resume"})
+        assert r["jobs"] == [ids[0]] and r["then"] == "resume"
     finally:
         emu.paper_left_steps = None
-        emu.clear_fault()
         client.pause_queue(False)
-    done = client.wait(jid, 60)
-    assert done["state"] == "done", done
-    assert np.array_equal(read_planes(srv.root / "media" / f"job-{jid}.tif"), planes)
-    assert [(r["attempt"], r["outcome"]) for r in client.report(jid)] == \
-        [(1, "failed"), (2, "done")]
+    for job_id, p in zip(ids, planes):
+        done = client.wait(job_id, 120)
+        assert done["state"] == "done", done
+        assert np.array_equal(read_planes(srv.root / "media" / f"job-{job_id}.tif"), p)
+    assert [r["outcome"] for r in client.report(ids[0])] == ["stopped", "done"]
+
+
+def test_a_cleared_fault_can_fail_the_stopped_job(srv, client, tmp_path):
+    planes = random_planes(300, 200, seed=39)
+    jid = client.submit(write_cmyk_tiff(tmp_path / "short.tif", planes),
+                        settings={"passes": 4})["job"]["id"]
+    wait_for(lambda: client.job(jid)["strokes_done"] >= 1, 30, poll=0.005, what="the first stroke")
+    emu = srv.worker.dev.emulator
+    emu.paper_left_steps = 1
+    try:
+        assert _wait_state(client, jid, ("held", "failed", "done"))["state"] == "held"
+        emu.paper_left_steps = None
+        r = client.request("POST", "/v1/printers/main/clear-fault", body={"then": "fail"})
+        assert r["jobs"] == [jid]
+    finally:
+        emu.paper_left_steps = None
+        client.pause_queue(False)
+    job = client.job(jid)
+    assert job["state"] == "failed" and "paper out" in job["message"] and "operator" in job["message"]
+    assert client.status()["printers"][0]["state"] == "idle"
 
 
 def test_requeue_is_refused_with_the_reason(srv, client):
@@ -731,7 +765,7 @@ def schema_2() -> str:
 
 
 def test_schema_1_database_gets_the_attempt_columns(tmp_path):
-    from wideprint.app.server.spool import Spool
+    from wideprint.app.server.spool import SCHEMA_VERSION, Spool
     state = tmp_path / "state"
     state.mkdir()
     old = re.sub(r"\n\s*attempt[^\n]*", "", schema_2())           # schema 1: no attempt columns
@@ -745,7 +779,7 @@ def test_schema_1_database_gets_the_attempt_columns(tmp_path):
     sp = Spool(state)
     assert sp.get(1)["attempt"] == 1
     assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
-    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
     sp.close()
 
 
@@ -754,7 +788,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     checkpoints naming the next stroke `next_pass`) opens with every job and print kept,
     its columns renamed to strokes; an interrupted job still resumes where it stopped."""
     from wideprint.app.server.accounting import prints_csv
-    from wideprint.app.server.spool import Spool
+    from wideprint.app.server.spool import SCHEMA_VERSION, Spool
     state = tmp_path / "state"
     state.mkdir()
     db = sqlite3.connect(state / "wideprint.db")
@@ -774,7 +808,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     db.close()
     sp = Spool(state)
     try:
-        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == "3"
+        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
         for table in ("jobs", "prints"):
             cols = {r[1] for r in sp.db.execute(f"PRAGMA table_info({table})")}
             assert not {c for c in cols if c.startswith("passes")}, cols

@@ -49,4 +49,6 @@ def test_print_through_standalone_emulator(tmp_path, serial, data):
         proc.terminate()
         out, err = proc.communicate(timeout=10)
     assert "Traceback" not in err, err
-    assert np.array_equal(read_planes(tmp_path / "media-1.tif"), planes)
+    media = list(tmp_path.glob("media-*.tif"))          # {job}: this run's printer job id
+    assert len(media) == 1, media
+    assert np.array_equal(read_planes(media[0]), planes)

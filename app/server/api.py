@@ -270,6 +270,45 @@ class ApiHandler(BaseHTTPRequestHandler):
             log.debug("api %s: the client went away before its answer (%s %d; %s)",
                      self.client_address[0], self.command or "-", status, type(exc).__name__)
 
+    def _events(self, max_s: int | None) -> None:
+        """Server-sent events (text/event-stream, docs/server.md "Live state"): the state of
+        the printers (`printers`: state, fault, current job and its telemetry) and of the
+        jobs not finished (`jobs`), each sent when it changes, checked 5 times a second on
+        the server; a comment every 15 s keeps the connection alive.  One stream replaces a
+        client's polling.  `?max_s=N` ends the stream after N seconds (tests, scripts)."""
+        import time as _time
+        srv = self.srv
+        self.close_connection = True
+        try:
+            self.connection.settimeout(self.idle)
+            self.send_response(200)
+            self.send_header("Content-Type", "text/event-stream")
+            self.send_header("Cache-Control", "no-store")
+            self.send_header("Connection", "close")
+            self._answered = True
+            self.end_headers()
+            last: dict = {}
+            beat = start = _time.monotonic()
+            while not srv.stopping():
+                now = _time.monotonic()
+                if max_s is not None and now - start >= max_s:
+                    break
+                state = {"printers": srv.printers(),
+                         "jobs": srv.jobs(("queued", "held", "printing"))}
+                for kind, value in state.items():
+                    if value != last.get(kind):
+                        last[kind] = value
+                        data = json.dumps(value, separators=(",", ":"), default=str)
+                        self.wfile.write(f"event: {kind}\ndata: {data}\n\n".encode())
+                        beat = now
+                if now - beat >= 15:
+                    self.wfile.write(b": alive\n\n")
+                    beat = now
+                self.wfile.flush()
+                _time.sleep(0.2)
+        except GONE as exc:
+            log.debug("api %s: an event stream ended (%s)", self.client_address[0], type(exc).__name__)
+
     def _json(self, status: int, obj, close: bool = False, extra: dict | None = None) -> None:
         self._send(status, (json.dumps(obj, indent=1) + "\n").encode(), "application/json",
                    close, extra)
@@ -420,8 +459,36 @@ class ApiHandler(BaseHTTPRequestHandler):
                 if not isinstance(body, dict) or set(body) - {"paused"} or \
                         not isinstance(body.get("paused"), bool):
                     raise Invalid('expected {"paused": true|false}')
-                self.srv.worker.set_paused(body["paused"], "paused by the operator")
+                for w in self.srv.workers.values():       # the whole queue: every printer
+                    if not w.fault:                       # a fault stays until cleared
+                        w.set_paused(body["paused"], "paused by the operator")
                 return self._json(200, self.srv.status())
+            if method == "GET" and route == ["events"]:
+                q = self._query(url.query, ("max_s",))
+                max_s = _number("max_s", q["max_s"]) if "max_s" in q else None
+                return self._events(max_s)
+            if method == "GET" and route == ["printers"]:
+                self._query(url.query, ())
+                return self._json(200, {"printers": self.srv.printers()})
+            if method == "POST" and route == ["estop"]:
+                self._query(url.query, ())
+                return self._json(200, {"stopped": self.srv.estop()})
+            if len(route) == 3 and route[0] == "printers" and method == "POST":
+                self._query(url.query, ())
+                name, what = route[1], route[2]
+                worker = self.srv.printer_worker(name)
+                if what == "clear-fault":
+                    if not isinstance(body, dict) or set(body) - {"then"}:
+                        raise Invalid('expected {"then": "resume"|"fail"}')
+                    return self._json(200, self.srv.clear_fault(name, body.get("then", "resume")))
+                if what in ("pause", "resume"):
+                    if body:
+                        raise Invalid(f"{what} takes no parameters")
+                    if what == "resume" and worker.fault:
+                        raise Invalid(f"printer {name} has a fault ({worker.fault}): clear it "
+                                      f"(resume or fail its job)", 409)
+                    worker.set_paused(what == "pause", "paused by the operator")
+                    return self._json(200, {"printers": self.srv.printers()})
             if len(route) >= 2 and route[0] == "jobs":
                 job_id = parse_number(route[1])
                 if job_id is None:
@@ -438,6 +505,11 @@ class ApiHandler(BaseHTTPRequestHandler):
                     pr = _check_int("priority", body["priority"], *PRIORITY_RANGE)
                     job = self.srv.spool.set_priority(job_id, pr)
                     return self._json(200, {"job": self.srv.public(job)})
+                if method == "POST" and len(route) == 3 and route[2] == "move":
+                    if not isinstance(body, dict) or set(body) != {"printer"} or \
+                            not isinstance(body["printer"], (str, type(None))):
+                        raise Invalid('expected {"printer": NAME|"any"}')
+                    return self._json(200, {"job": self.srv.public(self.srv.move(job_id, body["printer"]))})
                 if method == "POST" and len(route) == 3 and route[2] in ("cancel", "hold", "release",
                                                                           "requeue"):
                     if body:
@@ -470,7 +542,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                 raw = loads(headers[0])
             except ValueError as exc:
                 raise Invalid(f"bad JSON in X-Wideprint-Job: {exc}") from None
-            req = validate_job_request(raw, srv.presets, srv.profile, srv.state_dir / "icc")
+            req = validate_job_request(raw, srv.presets, srv.profile, srv.state_dir / "icc",
+                                       printers=tuple(srv.workers))
             size = self._length
             if size is None:
                 raise Invalid("Content-Length is required", 411)
@@ -487,7 +560,8 @@ class ApiHandler(BaseHTTPRequestHandler):
             job, created = srv.queue_file(
                 self.rfile, req["name"], size, exact=True, source="api",
                 settings=req["settings"], preset=req["preset"], copies=req["copies"],
-                priority=req["priority"], hold=req["hold"], key=req["key"], client=req["client"])
+                priority=req["priority"], hold=req["hold"], key=req["key"], client=req["client"],
+                printer=req["printer"])
         except Invalid as exc:
             self.close_connection = True
             return self._error(exc.status, str(exc), close=True)
@@ -500,7 +574,7 @@ class ApiHandler(BaseHTTPRequestHandler):
         self._body_left = 0
         if not created:
             return self._json(200, {"job": srv.public(job), "duplicate": True})
-        srv.worker.notify()
+        srv.notify()
         self._json(201, {"job": srv.public(job), "duplicate": False})
 
     def do_GET(self):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,6 +83,18 @@ def unique_names(name: str):
 
 
 @dataclass
+class PrinterConfig:
+    """One printer of the server: its name (used by jobs, the API and the GUI), its device
+    spec and its printer profile."""
+    name: str = "main"
+    device: str = "emulator"
+    profile_path: str | None = None
+
+
+PRINTER_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,31}$")
+
+
+@dataclass
 class ServerConfig:
     device: str = "emulator"
     state_dir: Path = field(default_factory=default_state_dir)
@@ -99,3 +112,17 @@ class ServerConfig:
     settle_s: float = DEFAULT_SETTLE_S     # hot folders: unchanged this long (and no writer)
     api_timeout_s: float = DEFAULT_API_TIMEOUT_S      # idle API connections are closed
     api_max_connections: int = DEFAULT_API_CONNECTIONS  # served at once; more: 503
+    printers: list = field(default_factory=list)   # PrinterConfig; empty: one, "main", of
+    #                                                device/profile_path above
+
+    def printer_configs(self) -> list[PrinterConfig]:
+        """The server's printers: the ones configured, else one called "main"."""
+        out = list(self.printers) or [PrinterConfig("main", self.device, self.profile_path)]
+        names = [p.name for p in out]
+        for name in names:
+            if not PRINTER_NAME.match(name):
+                raise ValueError(f"printer name {name!r}: use letters, digits, '.', '_' or '-' "
+                                 f"(1-32, starting with a letter or digit)")
+        if len(set(names)) != len(names):
+            raise ValueError(f"printer names must differ: {', '.join(names)}")
+        return out

@@ -53,7 +53,10 @@ class PrintServer:
         (self.state_dir / "icc").mkdir(exist_ok=True)
         if config.media_dir:
             Path(config.media_dir).mkdir(parents=True, exist_ok=True)
-        self.profile = load_profile(config.profile_path)
+        self.printer_configs = config.printer_configs()
+        # each printer its own profile; settings and presets are checked against the first
+        self.profiles = {p.name: load_profile(p.profile_path) for p in self.printer_configs}
+        self.profile = self.profiles[self.printer_configs[0].name]
         self.preset_source = Presets(self.state_dir, self.profile)
         self.token = ensure_token(self.state_dir)
         self.spool = Spool(self.state_dir)
@@ -63,7 +66,8 @@ class PrintServer:
             log.warning("job %s: %s", job["id"], job["message"])
         self._clean_spool()
         self.expire_spool()
-        self.worker = Worker(self)
+        self.workers = {p.name: Worker(self, p, self.profiles[p.name]) for p in self.printer_configs}
+        self.worker = next(iter(self.workers.values()))     # the first printer
         self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
         handler = type("Handler", (ApiHandler,), {"srv": self})
         if config.host not in ("127.0.0.1", "localhost", "::1"):
@@ -95,6 +99,9 @@ class PrintServer:
             except OSError:
                 pass
 
+    def stopping(self) -> bool:
+        return self._stopped.is_set()
+
     def keeps_copy(self, state: str) -> bool:
         """Whether a job ending in `state` keeps its spool copy: failed and cancelled jobs
         do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0."""
@@ -120,7 +127,8 @@ class PrintServer:
         return dict(self.preset_source.info(), presets=presets, **diff)
 
     def start(self) -> None:
-        self.worker.start()
+        for w in self.workers.values():
+            w.start()
         self._http_thread.start()
         if self.hot:
             self.hot.start()
@@ -136,7 +144,8 @@ class PrintServer:
         self._stopped.set()
         if self.hot:
             self.hot.stopping.set()
-        self.worker.interrupt(timeout)
+        for w in self.workers.values():
+            w.interrupt(timeout)
         self.http.shutdown()
         self.http.server_close()
         if self.hot:
@@ -223,9 +232,10 @@ class PrintServer:
         keep = self.keeps_copy("cancelled")
         job = self.spool.cancel_waiting(job_id, keep_copy=keep)
         if job is None:                                # printing: stop it at the printer
-            if not self.worker.cancel(job_id):
-                # claimed but not started yet, or between copies: the worker checks this set
-                self.worker._cancel.add(job_id)
+            if not any(w.cancel(job_id) for w in self.workers.values()):
+                # claimed but not started yet, or between copies: the workers check this set
+                for w in self.workers.values():
+                    w._cancel.add(job_id)
             deadline = time.monotonic() + 10
             while time.monotonic() < deadline:
                 job = self.spool.get(job_id)
@@ -239,7 +249,7 @@ class PrintServer:
                 os.unlink(before["spool_path"])
             except OSError:
                 pass
-        self.worker.notify()
+        self.notify()
         return job
 
     def hold(self, job_id: int) -> dict:
@@ -247,7 +257,7 @@ class PrintServer:
 
     def release(self, job_id: int) -> dict:
         job = self.spool.release(job_id)
-        self.worker.notify()
+        self.notify()
         return job
 
     def requeue(self, job_id: int) -> dict:
@@ -255,11 +265,72 @@ class PrintServer:
         "Requeue"); refused, with the reason, for other states or a spool copy gone."""
         before = self.spool.get(job_id)
         if before is not None and before["state"] in ("failed", "cancelled"):
-            self.worker.forget_cancel(job_id)      # a late cancel of the ended attempt
+            for w in self.workers.values():
+                w.forget_cancel(job_id)            # a late cancel of the ended attempt
         job = self.spool.requeue(job_id)
         log.info("job %s requeued (attempt %s)", job_id, job["attempt"])
-        self.worker.notify()
+        self.notify()
         return job
+
+    def notify(self) -> None:
+        """Wake every printer's worker (a job was queued or released)."""
+        for w in self.workers.values():
+            w.notify()
+
+    def printer_worker(self, name: str) -> Worker:
+        w = self.workers.get(name)
+        if w is None:
+            raise Invalid(f"no printer {name!r} (printers: {', '.join(self.workers)})", 404)
+        return w
+
+    def clear_fault(self, name: str, then: str = "resume") -> dict:
+        """Printer `name`'s fault cleared by the operator: its stopped job resumes at its
+        first unfinished stroke (or fails), its queue runs again (docs/server.md,
+        "Printer faults")."""
+        w = self.printer_worker(name)
+        try:
+            return w.clear_fault(then)
+        except ValueError as exc:
+            raise Invalid(str(exc)) from None
+        except RuntimeError as exc:
+            raise Invalid(str(exc), 409) from None
+
+    def move(self, job_id: int, printer: str | None) -> dict:
+        """A job not yet started goes to another printer (None or "any": the first free)."""
+        if printer in (None, "", "any"):
+            printer = None
+        else:
+            self.printer_worker(printer)
+        job = self.spool.set_printer(job_id, printer)
+        self.notify()
+        return job
+
+    def estop(self) -> list[str]:
+        """Emergency stop: every printer that is printing stops at once (its job is held
+        with the ESTOP fault until cleared); the others are paused."""
+        stopped = []
+        for name, w in self.workers.items():
+            job = w.job
+            if job is not None:
+                job.control.estop()
+                stopped.append(name)
+            w.set_paused(True, "emergency stop by the operator")
+        log.warning("emergency stop: %s", ", ".join(stopped) or "nothing was printing")
+        return stopped
+
+    def printers(self) -> list[dict]:
+        out = []
+        for name, w in self.workers.items():
+            cur = dict(w.current) if w.current else None
+            if cur is not None and w.job is not None:
+                t = w.job.telemetry
+                cur["telemetry"] = dict(carriage_counts=t.carriage_counts, paper_steps=t.paper_steps,
+                                        fires_done=t.fires_done, head_temps_c=list(t.head_temps_c),
+                                        fifo_words=list(t.fifo_words), fault=t.fault, retries=t.retries)
+            out.append(dict(name=name, device=w.printer.device, profile=w.profile.path,
+                            state=w.printer_state, error=w.printer_error, fault=w.fault or None,
+                            paused=w.paused, reason=w.pause_reason, current=cur))
+        return out
 
     def hot_done(self, job: dict, state: str, message: str) -> None:
         """A hot-folder job ended: its original goes to done/ or failed/ (with reason),
@@ -271,22 +342,21 @@ class PrintServer:
                         else f"job {job['id']} {state}: {message}")
 
     def status(self) -> dict:
-        w = self.worker
+        """The server, its queue and its printers.  `printer`, `current` and `queue.paused`
+        describe the first printer, as with one printer (older clients)."""
         self.preset_source.get()                     # the status reports the file as it is now
-        cur = dict(w.current) if w.current else None
-        if cur is not None and w.job is not None:
-            t = w.job.telemetry
-            cur["telemetry"] = dict(carriage_counts=t.carriage_counts, paper_steps=t.paper_steps,
-                                    fires_done=t.fires_done, head_temps_c=list(t.head_temps_c),
-                                    fault=t.fault, retries=t.retries)
+        printers = self.printers()
+        first = printers[0]
         return dict(server=dict(version=_version(), pid=os.getpid(), url=self.url,
-                                started=self.started, device=self.config.device,
+                                started=self.started, device=self.config.printer_configs()[0].device,
                                 on_crash=self.config.on_crash,
                                 hot_folder_root=str(self.config.hot_folder_root or "") or None),
-                    queue=dict(paused=w.paused, reason=w.pause_reason, counts=self.spool.counts()),
+                    queue=dict(paused=first["paused"], reason=first["reason"],
+                               counts=self.spool.counts()),
                     presets=self.preset_source.info(),
-                    printer=dict(state=w.printer_state, error=w.printer_error),
-                    current=cur)
+                    printer=dict(state=first["state"], error=first["error"], fault=first["fault"]),
+                    printers=printers,
+                    current=first["current"])
 
     def report_csv(self, job_id: int | None = None) -> str:
         return prints_csv(self.spool.prints(job_id))

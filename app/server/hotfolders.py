@@ -540,7 +540,7 @@ class HotFolders(threading.Thread):
         self.seen.pop(key, None)
         self.taken[key] = _ident(st)
         log.info("hot folder %s: %s is job %s", preset, name, job["id"])
-        self.srv.worker.notify()
+        self.srv.notify()
 
 
 def _ident(st) -> tuple:

@@ -76,10 +76,11 @@ def rip_settings(settings: dict):
     return from_mapping(settings)
 
 
-JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings"}
+JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer"}
 
 
-def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None) -> dict:
+def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
+                         printers: tuple = ()) -> dict:
     """The X-Wideprint-Job header of an upload: returns the checked request with the
     effective settings (preset overlaid by explicit settings)."""
     if not isinstance(raw, dict):
@@ -90,6 +91,12 @@ def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None) -> d
     if "name" not in raw:
         raise Invalid("name is required")
     req = {"name": validate_name(raw["name"])}
+    printer = raw.get("printer")
+    if printer in (None, "any"):
+        printer = None
+    elif not isinstance(printer, str) or (printers and printer not in printers):
+        raise Invalid(f"unknown printer {printer!r} (printers: {', '.join(printers) or 'main'}, or any)")
+    req["printer"] = printer
     preset = raw.get("preset")
     if preset is not None:
         if not isinstance(preset, str) or preset not in presets:

@@ -1,5 +1,8 @@
-"""The print worker: prints queued jobs one at a time on the server's printer, persisting
-each job's checkpoint after every stroke (docs/server.md, "The worker")."""
+"""The print worker: one per printer; prints that printer's queued jobs (and those for any
+printer) one at a time, persisting each job's checkpoint after every stroke.  A printer
+fault stops this printer's queue at the job, which waits with its checkpoint until the
+operator clears the fault; the other printers go on (docs/server.md, "The worker",
+"Printer faults")."""
 
 from __future__ import annotations
 
@@ -21,18 +24,24 @@ log = logging.getLogger("wideprint.server")
 
 # -- the worker -------------------------------------------------------------------------------
 class Worker(threading.Thread):
-    """Prints queued jobs one at a time, in queue order."""
+    """One printer: prints its queued jobs one at a time, in queue order."""
 
-    def __init__(self, server: "PrintServer"):
-        super().__init__(name="wideprint-worker", daemon=True)
+    def __init__(self, server: "PrintServer", printer=None, profile=None):
+        from .config import PrinterConfig
+        self.printer = printer or PrinterConfig("main", server.config.device,
+                                                server.config.profile_path)
+        self.name_ = self.printer.name
+        super().__init__(name=f"wideprint-worker-{self.name_}", daemon=True)
         self.srv = server
+        self.profile = profile if profile is not None else server.profile
         self.spool = server.spool
+        self.fault = ""                    # the printer fault that stopped this printer
         self.wake = threading.Condition()
         self.paused = server.config.start_paused
         self.pause_reason = "started paused" if self.paused else ""
         self.stopping = False
         self.dev = None
-        self.printer_state = "idle"        # idle, printing, offline
+        self.printer_state = "idle"        # idle, printing, offline, fault
         self.printer_error = ""
         self.current: dict | None = None   # id, name, copy, state, detail, stroke, ...
         self.job = None                    # the PrintJob now running
@@ -49,6 +58,38 @@ class Worker(threading.Thread):
         self.paused = paused
         self.pause_reason = reason if paused else ""
         self.notify()
+
+    def clear_fault(self, then: str = "resume") -> dict:
+        """The operator cleared the printer (loaded paper, let a head cool, freed the rail):
+        CLEAR_FAULT on the printer, then the job the fault stopped goes back to the head of
+        the queue to resume at its first unfinished stroke (`then="resume"`) or fails
+        (`then="fail"`), and this printer's queue runs again."""
+        from ...driver.link import LinkError
+        from ...driver.printer import Printer
+        if then not in ("resume", "fail"):
+            raise ValueError("then must be 'resume' or 'fail'")
+        if self.job is not None:
+            raise RuntimeError(f"printer {self.name_} is printing: nothing to clear")
+        cleared = ""
+        try:
+            printer = Printer(self._device())
+            printer.connect()
+            code = printer.clear_fault()
+            cleared = printer.fault_text() or ("" if not code else f"fault 0x{code:02X} cleared")
+        except (LinkError, OSError, ValueError) as exc:
+            raise RuntimeError(f"printer {self.name_}: cannot clear the fault: {exc}") from None
+        jobs = self.spool.fault_stopped(self.name_)
+        for job in jobs:
+            if then == "resume":
+                self.spool.resume_after_fault(job["id"])
+            else:
+                self._finish(job, "failed", f"{job['fault']} (failed by the operator)")
+        self.fault = ""
+        self.printer_state, self.printer_error = "idle", ""
+        self.set_paused(False)
+        log.info("printer %s: fault cleared; job(s) %s %s", self.name_,
+                 ", ".join(str(j["id"]) for j in jobs) or "-", "resumed" if then == "resume" else "failed")
+        return dict(printer=self.name_, jobs=[j["id"] for j in jobs], then=then, still=cleared)
 
     def cancel(self, job_id: int) -> bool:
         cur = self.current
@@ -89,7 +130,7 @@ class Worker(threading.Thread):
             job = None
             if not self.paused:
                 try:
-                    job = self.spool.next_job()
+                    job = self.spool.next_job(self.name_)
                 except Exception:  # noqa: BLE001 - a database hiccup must not end the worker
                     log.exception("reading the queue")
             if job is None:
@@ -114,7 +155,7 @@ class Worker(threading.Thread):
             from ..devices import open_device
             media = self.srv.config.media_dir
             media_path = (lambda job: str(media / f"job-{job}.tif")) if media else None
-            self.dev = open_device(self.srv.config.device, self.srv.profile, media_path=media_path)
+            self.dev = open_device(self.printer.device, self.profile, media_path=media_path)
         return self.dev
 
     def _drop_device(self) -> None:
@@ -142,7 +183,7 @@ class Worker(threading.Thread):
         from ...driver.link import DeviceError, LinkError
         from ...driver.stream import StreamError
 
-        job = self.spool.claim(job_id)
+        job = self.spool.claim(job_id, self.name_)
         if job is None:
             return
         resumed = job["checkpoint"] is not None
@@ -173,7 +214,7 @@ class Worker(threading.Thread):
                 self._finish(job, "cancelled", "cancelled by the operator")
                 return
             try:
-                rip = RipJob(job["spool_path"], rip_settings(settings), self.srv.profile)
+                rip = RipJob(job["spool_path"], rip_settings(settings), self.profile)
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
                 self._account(job, copy, started, None, "failed", msg, resumed)
@@ -192,7 +233,7 @@ class Worker(threading.Thread):
                     self._account(job, copy, started, None, "failed", msg, resumed)
                     self._finish(job, "failed", msg)
                     return
-                epoch = job.get("epoch") or self.spool.epoch()
+                epoch = job.get("epoch") or self.spool.epoch(self.name_)
 
                 def on_event(kind, **kw):
                     cur = self.current
@@ -225,10 +266,18 @@ class Worker(threading.Thread):
                         self._drop_device()
                         self._offline(job_id, str(exc))
                         return
+                    if exc.fault and not self.stopping:
+                        # the printer's fault, not the job's: this printer stops at the job,
+                        # which keeps its checkpoint until the operator clears the fault
+                        self._account(job, copy, started, pj.report, "stopped", str(exc), resumed)
+                        self.spool.stop_for_fault(job_id, str(exc))
+                        self.fault = str(exc)
+                        self.printer_state, self.printer_error = "fault", str(exc)
+                        self.set_paused(True, f"printer fault: {exc}; clear it to resume or fail the job")
+                        log.warning("printer %s: %s; job %s waits", self.name_, exc, job_id)
+                        return
                     self._account(job, copy, started, pj.report, "failed", str(exc), resumed)
                     self._finish(job, "failed", str(exc))
-                    if exc.fault:
-                        self.set_paused(True, f"printer fault: {exc}; clear it and resume the queue")
                     return
                 finally:
                     self.job = None
@@ -267,7 +316,7 @@ class Worker(threading.Thread):
 
     def _account(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
                  resumed: bool) -> None:
-        prof = self.srv.profile
+        prof = self.profile
         ended = time.time()
         r = rep.as_dict() if rep is not None else {}
         drops = [int(d) for d in r.get("drops", [0, 0, 0, 0])]

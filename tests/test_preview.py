@@ -1,0 +1,70 @@
+"""Previews (`print --preview`, rip/planes.py preview_image): true physical aspect on the
+anisotropic device grid, area-averaged (no aliasing), built in bands (memory bounded by a
+band and the picture, whatever the print's length)."""
+
+import subprocess
+import sys
+
+import numpy as np
+
+from wideprint.rip.planes import PlanesWriter, preview_image
+
+DPI_X, DPI_Y = 300.0, 25400 / 68.55
+
+
+def _write(path, planes):
+    with PlanesWriter(path, planes.shape[1], planes.shape[0], DPI_X, DPI_Y) as w:
+        for y in range(0, planes.shape[0], 100):
+            w.write(planes[y:y + 100])
+
+
+def test_a_square_previews_square(tmp_path):
+    """60 mm x 60 mm of ink: 709 columns by 875 rows on the grid, one square in the picture."""
+    cols, rows = round(60 / 25.4 * DPI_X), round(60 / 25.4 * DPI_Y)
+    planes = np.zeros((rows, cols, 4), np.uint8)
+    planes[..., 3] = 1
+    _write(tmp_path / "sq.tif", planes)
+    img = preview_image(tmp_path / "sq.tif", max_side=500)
+    assert abs(img.shape[0] - img.shape[1]) <= 1, img.shape
+
+
+def test_fine_patterns_average_instead_of_aliasing(tmp_path):
+    """Stripes of 1 dot on, 2 off (the old every-third-dot sampling saw all or nothing):
+    the preview is an even tint at a third of the ink, with no streaks."""
+    planes = np.zeros((3000, 6000, 4), np.uint8)
+    planes[:, ::3, 1] = 1                               # magenta every third column
+    planes[::3, :, 0] = 1                               # cyan every third row
+    _write(tmp_path / "stripes.tif", planes)
+    img = preview_image(tmp_path / "stripes.tif", max_side=800).astype(float)
+    inner = img[2:-2, 2:-2]
+    assert inner.std(axis=(0, 1)).max() < 4.0               # even (1.5 %): no streaks
+    green = inner[..., 1].mean()                            # magenta absorbs green
+    assert 120 < green < 225                                # a tint, neither white nor solid
+
+
+def test_memory_is_bounded_by_the_band_not_the_length(tmp_path):
+    """A 5.4 m long, 1 m wide print (11,811 x 80,000 dots, 3.8 GB of dots): the preview
+    grows the process by far less than the print, which it never holds."""
+    script = f"""
+import resource, sys, numpy as np
+from wideprint.rip.planes import PlanesWriter, preview_image
+w, h = 11811, 80000                        # 1 m x 5.4 m at 300 x 370.5
+with PlanesWriter({str(tmp_path / 'long.tif')!r}, w, h, {DPI_X}, {DPI_Y}) as out:
+    band = np.zeros((4000, w, 4), np.uint8)
+    band[::7, ::5, 2] = 1
+    for y in range(0, h, 4000):
+        out.write(band[:min(4000, h - y)])
+with PlanesWriter({str(tmp_path / 'small.tif')!r}, 64, 64, {DPI_X}, {DPI_Y}) as out:
+    out.write(np.zeros((64, 64, 4), np.uint8))
+preview_image({str(tmp_path / 'small.tif')!r})      # the kernel loaded: its memory is not the print's
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+img = preview_image({str(tmp_path / 'long.tif')!r}, max_side=2000)
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(img.shape[0], img.shape[1], base, peak)
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    ph, pw, base, peak = map(int, r.stdout.split())
+    assert ph == 2000 and abs(pw / ph - (1000 / (80000 / 370.5 * 25.4))) < 0.01
+    # the print is 3.8 GB of dots; the preview may not grow the process by more than 150 MB
+    assert peak - base < 150_000, (base, peak)
