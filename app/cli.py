@@ -565,7 +565,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("print", help="rip and print files")
-    p.add_argument("files", nargs="+", metavar="FILE", help="images (TIFF/BMP/JPEG) or folders")
+    p.add_argument("files", nargs="+", metavar="FILE", help="images (TIFF/JPEG/PNG/BMP), PDF, PostScript, "
+                   "EPS, HP RTL, or folders")
     p.add_argument("--device", default="emulator",
                    help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--media-out", metavar="MEDIA.tif",

@@ -15,8 +15,9 @@ import numpy as np
 
 from .color import Separator
 from .halftone import ORDERED, Halftoner
-from .load import ImageSource, open_image
-from .place import place
+from .inputs import open_source, prescreened_packed
+from .load import ImageSource, open_image  # noqa: F401 - re-exported
+from .place import place  # noqa: F401 - re-exported
 from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
 from .screen import OrderedScreen
@@ -129,28 +130,27 @@ class RipJob(PrintableJob):
 
     def __post_init__(self):
         self.settings.check(self.profile)
-        loaded = open_image(self.path)
-        try:
-            # the image area on the device grid: physical size, scaled, rotated, mirrored
-            self.source: ImageSource = place(loaded, self.settings.placement, self.settings.dpi,
-                                             self.profile.row_um)
-        except ValueError as exc:
-            loaded.close()
-            raise ValueError(f"{self.path}: {exc}") from None
+        # the image area on the device grid: an image placed (physical size, scaled, rotated,
+        # mirrored), a PDF/PostScript page rendered onto it, or RTL raster (rip/inputs.py)
+        self.source: ImageSource = open_source(self.path, self.settings, self.profile)
         self.width, self.height = self.source.width, self.source.height
 
     @property
     def ink_limit(self) -> float | None:
         """--ink-limit if given; else the profile's limit for separations we make (RGB,
-        grey); CMYK files print as they are."""
+        grey, and documents, whose RGB Ghostscript separates with the RIP's profiles);
+        CMYK files print as they are."""
         if self.settings.ink_limit is not None:
             return self.settings.ink_limit
-        if self.source.colorspace == "cmyk":
+        if self.source.colorspace == "cmyk" and not getattr(self.source, "separated", False):
             return None
         return self.profile.color.ink_limit_percent
 
     def _separator(self) -> Separator:
         s = self.settings
+        if getattr(self.source, "separated", False):    # documents: Ghostscript applied the ICC path
+            return Separator("cmyk", 8, intent=s.intent, ink_limit=self.ink_limit,
+                             curves=profile_curves(self.profile))
         return Separator(self.source.colorspace, self.source.depth,
                          embedded_icc=self.source.icc, input_icc=s.input_icc,
                          output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
@@ -158,6 +158,9 @@ class RipJob(PrintableJob):
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
+        if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
+            yield from self.source.bands(self.settings.band_rows)
+            return
         if self.settings.dither in ORDERED:
             for bits in self.packed_bands():
                 yield unpack_dots(bits, self.width)
@@ -175,6 +178,9 @@ class RipJob(PrintableJob):
         path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
         next bands (on both cores) overlaps the stroke packing of this one."""
         s = self.settings
+        if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
+            yield from prefetch(prescreened_packed(self.source, s.band_rows), depth=1)
+            return
         if s.dither not in ORDERED:
             yield from super().packed_bands()
             return

@@ -30,6 +30,7 @@ SIZES = ("physical", "pixels")                                   # rip/place.py
 FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kernels
 ROTATIONS = (0, 90, 180, 270)                                    # degrees clockwise
 ALIGNS = ("left", "center", "right")
+PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page boxes (docs/documents.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
 TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
 
@@ -182,6 +183,17 @@ SETTINGS: tuple[Setting, ...] = (
             group="placement", nullable=True, nonnegative=True, metavar="MM", label="Side margins"),
     Setting("top_mm", float, 0.0, "blank paper fed before the image", group="placement",
             nonnegative=True, metavar="MM", label="Top margin"),
+    # documents: PDF, PostScript, EPS (docs/documents.md)
+    Setting("page_box", str, "crop", "PDF: the page box that is the page (crop, trim, bleed, "
+            "art, media; a box the page lacks falls back to the CropBox, then the MediaBox)",
+            group="placement", choices=PAGE_BOXES, label="Page box",
+            labels={"crop": "CropBox", "trim": "TrimBox", "bleed": "BleedBox", "art": "ArtBox",
+                    "media": "MediaBox"}),
+    Setting("pages", str, "all", "PDF/PostScript: the pages to print, e.g. 1-3,5 or 4- (default "
+            "all), one after another along the roll in one job", group="placement",
+            metavar="LIST", label="Pages"),
+    Setting("page_gap_mm", float, 10.0, "PDF/PostScript: blank paper between the pages of a "
+            "document", group="placement", nonnegative=True, metavar="MM", label="Page gap"),
 )
 
 BY_NAME = {s.name: s for s in SETTINGS}
@@ -245,6 +257,10 @@ class Placement:
     x_mm: float = 0.0  # then shifted this far to the right (negative: to the left)
     margin_mm: float | None = None  # side margins; None: the printer profile's [paper] margin_mm
     top_mm: float = 0.0  # blank paper fed before the image's first row
+    # documents (PDF, PostScript, EPS; docs/documents.md)
+    page_box: str = "crop"  # PDF: crop | trim | bleed | art | media
+    pages: str = "all"  # which pages, e.g. "1-3,5"; printed one after another along the roll
+    page_gap_mm: float = 10.0  # blank paper between pages
 
     def check(self) -> None:
         """Raise ValueError naming the problem if the options are inconsistent."""
@@ -256,8 +272,11 @@ class Placement:
             raise ValueError(f"placement: rotate must be 0, 90, 180 or 270 (degrees clockwise), not {self.rotate!r}")
         if self.align not in ALIGNS:
             raise ValueError(f"placement: align must be one of {', '.join(ALIGNS)}, not {self.align!r}")
+        if self.page_box not in PAGE_BOXES:
+            raise ValueError(f"placement: page_box must be one of {', '.join(PAGE_BOXES)}, not {self.page_box!r}")
+        parse_pages(self.pages)
         _finite("x_mm", self.x_mm)
-        for name in ("top_mm", "margin_mm"):
+        for name in ("top_mm", "margin_mm", "page_gap_mm"):
             v = getattr(self, name)
             if v is not None and _finite(name, v) < 0:
                 raise ValueError(f"placement: {name} must not be negative, not {v!r}")
@@ -293,7 +312,27 @@ class Placement:
         if xr is None and yr is None:
             xr = yr = DEFAULT_PPI
         xr, yr = xr or yr, yr or xr  # only one tag: square pixels
-        w_in, h_in = src_w / xr, src_h / yr  # physical size of the unrotated image
+        return self.target_size_inches(src_w / xr, src_h / yr, dpi, row_um)
+
+    def target_size_inches(self, w_in: float, h_in: float, dpi: int, row_um: float) -> tuple[int, int]:
+        """(columns, rows) after rotation for a source of w_in x h_in inches (unrotated):
+        the arithmetic of target_size() from the physical size on; documents use it with
+        their page size (`size` "pixels" counts as "physical" here)."""
+        dpi = _positive("dpi", dpi)
+        row_um = _positive("row_um", row_um)
+        w_in, h_in = self.scaled_inches(w_in, h_in)
+        wf, hf = w_in * dpi, h_in * MM_PER_INCH * 1000.0 / row_um
+        if not (math.isfinite(wf) and math.isfinite(hf)) or wf > 10 * MAX_SIDE or hf > 10 * MAX_SIDE:
+            return _check_target(math.inf, math.inf, f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
+        return _check_target(_round(wf), _round(hf), f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
+
+    def scaled_inches(self, w_in: float, h_in: float) -> tuple[float, float]:
+        """The size on the media in inches, (across, along) after rotation, of a source of
+        w_in x h_in inches (unrotated) under the size options."""
+        self.check()
+        w_in, h_in = float(w_in), float(h_in)
+        if not (w_in > 0 and h_in > 0 and math.isfinite(w_in) and math.isfinite(h_in)):
+            raise ValueError(f"placement: the source is {w_in * 25.4:g} x {h_in * 25.4:g} mm")
         if self.quarter_turn:
             w_in, h_in = h_in, w_in
         if self.width_mm is not None and self.height_mm is not None:
@@ -306,10 +345,29 @@ class Placement:
             w_in, h_in = w_in * want / h_in, want
         elif self.scale is not None:
             w_in, h_in = w_in * float(self.scale), h_in * float(self.scale)
-        wf, hf = w_in * dpi, h_in * MM_PER_INCH * 1000.0 / row_um
-        if not (math.isfinite(wf) and math.isfinite(hf)) or wf > 10 * MAX_SIDE or hf > 10 * MAX_SIDE:
-            return _check_target(math.inf, math.inf, f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
-        return _check_target(_round(wf), _round(hf), f" ({w_in * 25.4:.6g} x {h_in * 25.4:.6g} mm)")
+        return w_in, h_in
+
+
+def parse_pages(text: str) -> list[tuple[int, int | None]]:
+    """A page selection ("all", "3", "1-3,5", "4-") -> [(first, last or None)], 1-based;
+    ValueError naming the problem."""
+    if not isinstance(text, str):
+        raise ValueError(f"placement: pages must be a string like 1-3,5 or all, not {text!r}")
+    t = text.strip().lower().replace(" ", "")
+    if t in ("", "all"):
+        return [(1, None)]
+    out: list[tuple[int, int | None]] = []
+    for part in t.split(","):
+        a, dash, b = part.partition("-")
+        try:
+            first = int(a)
+            last = (int(b) if b else None) if dash else first
+        except ValueError:
+            raise ValueError(f"placement: pages must be like 1-3,5 or 4- or all, not {text!r}") from None
+        if first < 1 or (last is not None and last < first):
+            raise ValueError(f"placement: pages {part!r} is not a range of pages (pages count from 1)")
+        out.append((first, last))
+    return out
 
 
 def _check_target(w, h, what: str) -> tuple[int, int]:

@@ -206,3 +206,29 @@ def test_cups_refuses_a_format_the_printer_does_not_take(queue, tmp_path):
     r = subprocess.run(["lp", "-h", queue["host"], "-d", "wideprint", str(txt)],
                        capture_output=True, text=True, timeout=30, env=queue["env"])
     assert r.returncode != 0 and "nsupported" in r.stderr, r.stdout + r.stderr
+
+
+def test_lp_prints_a_pdf_through_cups(queue, wideprint_server, tmp_path):
+    """PDF passes through CUPS unfiltered (the PPD's cupsFilter2) and is ripped by the
+    server through Ghostscript: the media equals the planes `wideprint rip` makes of it."""
+    if not shutil.which("gs"):
+        pytest.skip("Ghostscript (gs) is not installed")
+    from wideprint.rip.pipeline import RipJob, RipSettings
+    from wideprint.rip.profile import load_profile
+    ps = tmp_path / "flyer.ps"
+    ps.write_bytes(b"%!PS\n<< /PageSize [144 72] >> setpagedevice 0 0.6 0.4 0 setcmykcolor\n"
+                   b"10 10 100 40 rectfill 0 0 0 1 setcmykcolor /Helvetica findfont 20 scalefont setfont\n"
+                   b"20 30 moveto (PDF) show showpage\n")
+    pdf = tmp_path / "flyer.pdf"
+    subprocess.run(["gs", "-q", "-dSAFER", "-dBATCH", "-dNOPAUSE", "-sDEVICE=pdfwrite", f"-sOutputFile={pdf}",
+                    str(ps)], check=True, capture_output=True)
+    client = Client(wideprint_server.state_dir)
+    known = {j["id"] for j in client.jobs()}
+    run(queue, "lp", "-h", queue["host"], "-d", "wideprint", str(pdf))
+    job = _wait_job(client, "flyer.pdf", known, timeout=90)
+    assert job["state"] == "done", job["message"] + _log(queue["dir"])
+    planes = tmp_path / "planes.tif"
+    RipJob(str(pdf), RipSettings(), load_profile()).write_planes(planes)
+    media = read_planes(wideprint_server.root / "media" / f"job-{job['id']}.tif")
+    assert media.shape == (round(72 / 72 * 25400 / 68.55), 600, 4)
+    assert np.array_equal(media, read_planes(planes))

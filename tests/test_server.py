@@ -328,6 +328,28 @@ def test_corrupt_image_fails_its_job_alone(srv, client, tmp_path):
     assert client.status()["queue"]["paused"] is False
 
 
+def test_rtl_in_a_hot_folder_and_a_hostile_postscript_job(srv, client, tmp_path):
+    """Documents and RTL are jobs like images: an RTL dropped into a hot folder prints its
+    dots bit-exact; a PostScript program that reads files fails its own job with
+    Ghostscript's reason, and the queue goes on."""
+    import shutil
+    from rtl_encode import encode_bits
+    planes = random_planes(50, 120, seed=21)
+    folder = srv.root / "hot" / "banner"
+    (tmp_path / "plot.rtl").write_bytes(encode_bits(planes, "simple-kcmy", 2))
+    before = {j["id"] for j in client.request("GET", "/v1/jobs")["jobs"]}
+    os.rename(tmp_path / "plot.rtl", folder / "plot.rtl")
+    jobs = wait_for(lambda: [j for j in client.request("GET", "/v1/jobs")["jobs"]
+                             if j["id"] not in before and j["name"] == "plot.rtl"], 20, what="the RTL job")
+    done = client.wait(jobs[0]["id"], 60)
+    assert done["state"] == "done", done
+    assert np.array_equal(read_planes(srv.root / "media" / f"job-{done['id']}.tif"), planes)
+    if shutil.which("gs"):
+        bad = client.submit_bytes(b"%!PS\n(/etc/passwd) (r) file showpage\n", name="sneaky.ps")["job"]
+        badj = client.wait(bad["id"], timeout=60)
+        assert badj["state"] == "failed" and "invalidfileaccess" in badj["message"], badj
+
+
 def test_hold_release_cancel_and_priority(srv, client):
     client.pause_queue(True)
     try:

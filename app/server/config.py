@@ -18,7 +18,10 @@ DEFAULT_MAX_FILE = 4 * 1024 ** 3          # 4 GiB
 TOKEN_FILE = "token"
 SERVER_FILE = "server.json"
 PRESET_FILES = ("presets.toml", "presets.json")
-IMAGE_SUFFIXES = (".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".png")
+# the formats the RIP prints (detected by content, rip/inputs.py; the suffix is kept on the
+# spool copy and when renaming): images, PDF/PostScript/EPS (Ghostscript), HP RTL
+IMAGE_SUFFIXES = (".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".png",
+                  ".pdf", ".ps", ".eps", ".epsf", ".ai", ".rtl", ".prn", ".plt", ".hpgl", ".pcl")
 IGNORED_SUFFIXES = (".part", ".tmp", ".temp", ".crdownload", ".partial", ".download", "~",
                     ".swp", ".reason.txt")
 MAX_COPIES = 100
