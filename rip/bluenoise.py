@@ -151,17 +151,26 @@ SCREEN_SIZE = 256
 SCREEN_SIGMA = 1.5
 SCREEN_ASPECT = 370.5 / 300.0   # rows per inch / columns per inch of the device grid
 SCREEN_SEED = 0
+SCREEN_WIDE = 4.0               # plus 0.3 x a Gaussian of 4 px: fewer large voids and clusters
+SCREEN_WIDE_WEIGHT = 0.3
 
 
-def _local_kernel(sigma: float, aspect: float) -> np.ndarray:
+def _local_kernel(sigma: float, aspect: float, wide: float = 0.0, wide_weight: float = 0.0) -> np.ndarray:
     """The Gaussian of the energy, truncated where it is below 1e-9 of its peak: sigma
-    columns across, sigma * aspect rows along (isotropic in physical units), (2ry+1, 2rx+1)."""
-    sx, sy = sigma, sigma * aspect
-    rx = int(np.ceil(sx * np.sqrt(2 * np.log(1e9))))
-    ry = int(np.ceil(sy * np.sqrt(2 * np.log(1e9))))
+    columns across, sigma * aspect rows along (isotropic in physical units), (2ry+1, 2rx+1);
+    plus ``wide_weight`` times a second Gaussian of sigma ``wide`` (if given)."""
+    big = max(sigma, wide)
+    rx = int(np.ceil(big * np.sqrt(2 * np.log(1e9))))
+    ry = int(np.ceil(big * aspect * np.sqrt(2 * np.log(1e9))))
     dy = np.arange(-ry, ry + 1, dtype=np.float64)[:, None]
     dx = np.arange(-rx, rx + 1, dtype=np.float64)[None, :]
-    return np.exp(-(dx * dx) / (2 * sx * sx) - (dy * dy) / (2 * sy * sy))
+
+    def g(s):
+        return np.exp(-(dx * dx) / (2 * s * s) - (dy * dy) / (2 * (s * aspect) ** 2))
+    k = g(sigma)
+    if wide and wide_weight:
+        k = k + wide_weight * g(wide)
+    return k
 
 
 def _vac_compiled():
@@ -235,7 +244,8 @@ def _vac_compiled():
 
 def screen_mask(size: int = SCREEN_SIZE, sigma: float = SCREEN_SIGMA,
                 aspect: float = SCREEN_ASPECT, seed: int = SCREEN_SEED,
-                initial_fraction: float = 0.1) -> np.ndarray:
+                initial_fraction: float = 0.1, wide: float = SCREEN_WIDE,
+                wide_weight: float = SCREEN_WIDE_WEIGHT) -> np.ndarray:
     """Void-and-cluster rank mask for the device grid: the energy's Gaussian is sigma
     columns across and sigma * aspect rows along, so the dots are evenly spread in
     *physical* distance on the 300 x 370.5 dpi grid (a square-pixel mask is squeezed along
@@ -247,7 +257,7 @@ def screen_mask(size: int = SCREEN_SIZE, sigma: float = SCREEN_SIGMA,
     ones = max(1, int(n * initial_fraction))
     pattern = np.zeros((size, size), dtype=np.bool_)
     pattern.reshape(-1)[rng.choice(n, size=ones, replace=False)] = True
-    k = _local_kernel(sigma, aspect)
+    k = _local_kernel(sigma, aspect, wide, wide_weight)
     if k.shape[0] > size or k.shape[1] > size:
         raise ValueError("sigma too large for the mask size")
     ranks = _vac_compiled()(pattern, k, ones)
@@ -273,15 +283,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--screen", action="store_true",
                     help="the screen mask: compiled void-and-cluster on the device grid "
                          "(--aspect, default 370.5/300; resources/masks/bluenoise256.npy is "
-                         "--screen --size 256 --sigma 1.9 --seed 0)")
+                         "--screen --size 256 --sigma 1.5 --seed 0)")
     ap.add_argument("--aspect", type=float, default=SCREEN_ASPECT,
                     help="with --screen: rows per column of equal physical length")
+    ap.add_argument("--wide", type=float, default=SCREEN_WIDE,
+                    help="with --screen: sigma of the second, wide Gaussian (default 4)")
+    ap.add_argument("--wide-weight", type=float, default=SCREEN_WIDE_WEIGHT,
+                    help="with --screen: its weight (default 0.3; 0: a single Gaussian)")
     ap.add_argument("--out", type=Path, required=True, help="output .npy path")
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
     if args.screen:
-        mask = screen_mask(args.size, args.sigma, args.aspect, args.seed)
+        mask = screen_mask(args.size, args.sigma, args.aspect, args.seed, wide=args.wide,
+                           wide_weight=args.wide_weight)
     else:
         mask = void_and_cluster(args.size, args.sigma, args.seed)
     dt = time.perf_counter() - t0
@@ -289,7 +304,8 @@ def main(argv: list[str] | None = None) -> int:
     np.save(args.out, mask)
     print(f"wrote {args.out}: {mask.shape} {mask.dtype}, ranks 0..{mask.size - 1}, "
           f"sigma={args.sigma}, seed={args.seed}"
-          f"{f', aspect={args.aspect:.6g}' if args.screen else ''}, {dt:.1f} s")
+          f"{f', aspect={args.aspect:.6g}, wide={args.wide:g} x {args.wide_weight:g}' if args.screen else ''}"
+          f", {dt:.1f} s")
     return 0
 
 
