@@ -159,7 +159,7 @@ def _local_kernel(sigma: float, aspect: float, wide: float = 0.0, wide_weight: f
     """The Gaussian of the energy, truncated where it is below 1e-9 of its peak: sigma
     columns across, sigma * aspect rows along (isotropic in physical units), (2ry+1, 2rx+1);
     plus ``wide_weight`` times a second Gaussian of sigma ``wide`` (if given)."""
-    big = max(sigma, wide)
+    big = max(sigma, wide if wide_weight else 0.0)
     rx = int(np.ceil(big * np.sqrt(2 * np.log(1e9))))
     ry = int(np.ceil(big * aspect * np.sqrt(2 * np.log(1e9))))
     dy = np.arange(-ry, ry + 1, dtype=np.float64)[:, None]

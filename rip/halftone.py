@@ -13,6 +13,16 @@ per image (or per page): it is not meant to be called from two threads at once.
 
 Methods (``METHODS``)
 ---------------------
+``vced`` (the default), ``vector``: variable-coefficient error diffusion with
+threshold modulation (rip/diffusion.py: Zhou-Fang's weights, the next pixel's
+weight x 1.15 for the 300 x 370.5 grid, a blue-noise modulation from the screen
+mask tuned per level to leave no periodic structure).  ``vced`` diffuses every
+ink on its own; ``vector`` decides C and M jointly (at most one of the two
+dots where C + M <= 100 %, at least one beyond; the pair's dots form one
+blue-noise pattern), Y and K on their own.  Serpentine on the absolute row,
+integer arithmetic, the error rows kept between bands as for ``fs``: identical
+bits for any band split.  Ink 0 never gets a drop, ink 255 always one.
+
 ``fs``, ``jarvis``, ``stucki``: error diffusion (Floyd-Steinberg 1976,
 Jarvis-Judice-Ninke 1976, Stucki 1981) with a serpentine scan: image rows with
 an even *absolute* row index go left to right, odd ones right to left (the
@@ -40,9 +50,11 @@ input in two channels gives the same bits).  ``seed`` does not affect error
 diffusion.
 
 ``bayer``, ``bluenoise``: ordered dither with a threshold mask of n x n ranks
-(N = n*n): the 16x16 recursive Bayer index matrix, or the shipped 128x128
-void-and-cluster blue-noise mask ``resources/masks/bluenoise128.npy`` (see
-:mod:`wideprint.rip.bluenoise`).  A pixel gets a drop when
+(N = n*n): the 16x16 recursive Bayer index matrix, or the shipped 256x256
+blue-noise screen mask ``resources/masks/bluenoise256.npy`` (void-and-cluster on
+the anisotropic device grid, see :mod:`wideprint.rip.bluenoise` and
+resources/masks/README.md; the 128x128 ``bluenoise128.npy`` is the pass masks'
+tile, rip/swath.py).  A pixel gets a drop when
 ``ink * N > rank * 255 + 127``, precomputed as an 8-bit threshold
 ``T = (rank * 255 + 127) // N`` with ``drop = ink > T``.  So ink 0 gives no
 drops, 255 gives all, and a constant ink v gives ``ceil((v N - 127) / 255)``
@@ -50,30 +62,36 @@ drops per tile, i.e. round(v N / 255) (the floor or the ceiling of v N / 255).
 The tile phase is the absolute row index (kept across bands) and the column
 index within the band's width.
 
-Channel decorrelation (ordered methods): channel ``k`` reads the mask shifted
-by ``(ox_k, oy_k)``, i.e. threshold at (row y, column x) is
-``T[(y + oy_k) % n, (x + ox_k) % n]``.  With ``seed=0`` (the default)::
+Channel layout, ``bluenoise`` (``screen_layout``): channel k reads the mask
+shifted by ``(ox_k, oy_k)``, i.e. threshold at (row y, column x) is
+``T_k[(y + oy_k) % n, (x + ox_k) % n]``, where ``T_k`` is the mask's threshold
+tile for even k and the *inverted* mask's (rank N-1-r) for odd k.  So C and M
+(and Y and K) are complementary: C's dots are the mask's lowest ranks, M's its
+highest, and where C + M <= 100 % no C dot lands on an M dot (beyond, they
+overlap as little as possible, C + M - 100 %).  The pairs are half a tile apart:
+(ox, oy) = (0, 0) for C and M, (128, 128) for Y and K, so C and M are
+uncorrelated with Y and K (no moire).  With ``seed != 0`` each pair's offset is
+drawn from ``numpy.random.default_rng(seed)``.
+
+Channel layout, ``bayer`` (``mask_offsets``): channel ``k`` reads the matrix
+shifted by ``(ox_k, oy_k)``.  With ``seed=0`` (the default)::
 
     ox_k = (n * k // 4 + 17 * k) % n
     oy_k = (n * k // 2 + 17 * (k // 2)) % n
 
-For the 128 blue-noise tile that is (0,0), (49,64), (98,17), (19,81): every
-pair of channels is at least 30 px apart on the torus, far beyond the mask's
-few-pixel correlation length, so the C, M, Y, K dot patterns are uncorrelated
-(they overlap as often as independent patterns would) and cannot beat against
-each other (no moire).  For the 16x16 Bayer tile it is (0,0), (5,8), (10,1),
-(15,9), whose phases mod 2 are the four different (0|1, 0|1): at 25 % ink the
-four channels' lattices are disjoint (dot beside dot, not dot on dot); at
-exactly 50 % Bayer has only two checkerboards, so channels 0 and 3 and
-channels 1 and 2 coincide there while 0 and 1 are complementary.  With
-``seed != 0`` the offsets are drawn from
+For the 16x16 Bayer tile it is (0,0), (5,8), (10,1), (15,9), whose phases mod 2
+are the four different (0|1, 0|1): at 25 % ink the four channels' lattices are
+disjoint (dot beside dot, not dot on dot); at exactly 50 % Bayer has only two
+checkerboards, so channels 0 and 3 and channels 1 and 2 coincide there while 0
+and 1 are complementary.  With ``seed != 0`` the offsets are drawn from
 ``numpy.random.default_rng(seed).integers(0, n, size=(channels, 2))`` as
 ``(ox_k, oy_k)`` rows.
 
 Speed: the kernels are numba ``@njit(cache=True, nogil=True)``, no Python
 per pixel.  Work is split over a small shared ``ThreadPoolExecutor`` (2
 workers, the machine has 2 cores): error diffusion gives each worker a group
-of planes (one kernel call loops over its planes), ordered dither gives each
+of planes (one kernel call loops over its planes; ``vced`` diffuses two planes
+in one loop, so their dependency chains overlap), ordered dither gives each
 worker a block of rows.  Measured against numba ``prange`` over planes on
 8000x2000x4 FS: about the same (medians within a few %; the machine is noisy).
 Threads were kept because they do not depend on numba's threading layer

@@ -9,7 +9,6 @@ from wideprint.rip import bluenoise
 from wideprint.rip.halftone import (
     BLUENOISE_PATH,
     METHODS,
-    SCREEN_PATH,
     Halftoner,
     bayer_matrix,
     load_bluenoise_mask,
