@@ -219,7 +219,7 @@ def peer_methods(work: str) -> dict:
 
         def run(cmyk, dev=dev):
             h, w = cmyk.shape[:2]
-            raw, ps = os.path.join(work, "gs_in.raw"), os.path.join(work, "gs_in.ps")
+            raw, ps = os.path.join(work, "gs_in.cmyk"), os.path.join(work, "gs_in.ps")
             cmyk.tofile(raw)
             with open(ps, "w") as f:
                 f.write(f"%!PS\n/DeviceCMYK setcolorspace\n{w * 72 / 300:.6f} {h * 72 / 300:.6f} scale\n"

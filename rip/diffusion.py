@@ -306,15 +306,21 @@ def _pair_decide(la, lb, va, vb, ta, tb, t):
 @njit(cache=True, nogil=True)
 def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, oxb, oyb, lim, joint):  # pragma: no cover
     rows, width = src.shape[0], src.shape[1]
-    nm = noise.shape[0] - 1
+    ch = np.uint64(src.shape[2])
+    u1, u2 = np.uint64(1), np.uint64(2)
+    cau, cbu = np.uint64(ca), np.uint64(cb)
+    nm = np.uint64(noise.shape[0] - 1)
+    oxau, oxbu = np.uint64(oxa), np.uint64(oxb)
     for i in range(rows):
         r = row0 + i
+        srow = src[i].reshape(-1)
+        drow = dst[i].reshape(-1)
         cura = erra[r & 1]
         nxta = erra[(r + 1) & 1]
         curb = errb[r & 1]
         nxtb = errb[(r + 1) & 1]
-        nra = noise[(r + oya) & nm]
-        nrb = noise[(r + oyb) & nm]
+        nra = noise[(r + oya) & (noise.shape[0] - 1)]
+        nrb = noise[(r + oyb) & (noise.shape[0] - 1)]
         carrya = 0
         penda = 0
         carryb = 0
@@ -322,20 +328,20 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, 
         fwd = (r & 1) == 0
         for k in range(width):
             if fwd:
-                x = k
-                q = x + 1           # the row-below cell behind this pixel (error-row index)
+                x = np.uint64(k)
             else:
-                x = width - 1 - k
-                q = x + 3
-            p = x + 2
-            la = src[i, x, ca]
-            lb = src[i, x, cb]
+                x = np.uint64(width - 1 - k)
+            p = x + u2
+            q = p - u1 if fwd else p + u1   # the row-below cell behind this pixel
+            o = x * ch
+            la = srow[o + cau]
+            lb = srow[o + cbu]
             aa = min(max(cura[p] + carrya, -lim), lim)
             ab = min(max(curb[p] + carryb, -lim), lim)
             va = np.int64(la) * _U + aa
             vb = np.int64(lb) * _U + ab
-            ta = _T0 + mod[la] * (np.int64(nra[(x + oxa) & nm]) - 128)
-            tb = _T0 + mod[lb] * (np.int64(nrb[(x + oxb) & nm]) - 128)
+            ta = _T0 + mod[la] * (np.int64(nra[(x + oxau) & nm]) - 128)
+            tb = _T0 + mod[lb] * (np.int64(nrb[(x + oxbu) & nm]) - 128)
             if joint:
                 # The pair's combined process - the sum of the two values, one dot or none
                 # (a + b <= 255), one or two (a + b > 255) - is itself a variable-coefficient
@@ -346,7 +352,7 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, 
                 lc = np.int64(la) + np.int64(lb)
                 if lc > 255:
                     lc -= 255
-                t = _T0 + mod[lc] * (np.int64(nra[(x + oxb) & nm]) - 128)
+                t = _T0 + mod[lc] * (np.int64(nra[(x + oxbu) & nm]) - 128)
                 oa, ob = _pair_decide(la, lb, va, vb, ta, tb, t)
                 if 16 <= lc <= 239:
                     ka = lc
@@ -359,8 +365,8 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, 
                 ob = 1 if vb >= tb else 0
                 ka = np.int64(la)
                 kb = np.int64(lb)
-            dst[i, x, ca] = oa
-            dst[i, x, cb] = ob
+            drow[o + cau] = oa
+            drow[o + cbu] = ob
             va -= oa * _FULL
             vb -= ob * _FULL
             ena = (va * wn[ka]) >> _SH
@@ -398,49 +404,51 @@ def _step(lvl, a, nz, tab):
 @njit(cache=True, nogil=True)
 def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):  # pragma: no cover
     """Two inks diffused independently in one loop (their dependency chains overlap); the
-    same arithmetic as ``_vc_plane``, one explicit loop per direction."""
+    same arithmetic as ``_vc_plane``, one explicit loop per direction.  src/dst must be
+    C-contiguous; the indices are unsigned (numba checks signed ones for wrap-around)."""
     rows, width = src.shape[0], src.shape[1]
-    nm = noise.shape[0] - 1
+    ch = np.uint64(src.shape[2])
+    u1, u2 = np.uint64(1), np.uint64(2)
+    cau, cbu = np.uint64(ca), np.uint64(cb)
+    nm = np.uint64(noise.shape[0] - 1)
+    oxau, oxbu = np.uint64(oxa), np.uint64(oxb)
     for i in range(rows):
         r = row0 + i
+        srow = src[i].reshape(-1)
+        drow = dst[i].reshape(-1)
         cura = erra[r & 1]
         nxta = erra[(r + 1) & 1]
         curb = errb[r & 1]
         nxtb = errb[(r + 1) & 1]
-        nra = noise[(r + oya) & nm]
-        nrb = noise[(r + oyb) & nm]
+        nra = noise[(r + oya) & (noise.shape[0] - 1)]
+        nrb = noise[(r + oyb) & (noise.shape[0] - 1)]
         ca_ = 0
         pa = 0
         cb_ = 0
         pb = 0
-        if (r & 1) == 0:
-            for x in range(width):
-                p = x + 2
-                da, ena, edla, eda = _step(src[i, x, ca], cura[p] + ca_, nra[(x + oxa) & nm], tab)
-                db, enb, edlb, edb = _step(src[i, x, cb], curb[p] + cb_, nrb[(x + oxb) & nm], tab)
-                dst[i, x, ca] = da
-                dst[i, x, cb] = db
-                ca_ = ena
-                cb_ = enb
-                nxta[p - 1] = pa + edla
-                nxtb[p - 1] = pb + edlb
-                pa = eda
-                pb = edb
+        fwd = (r & 1) == 0
+        for k in range(width):
+            if fwd:
+                x = np.uint64(k)
+            else:
+                x = np.uint64(width - 1 - k)
+            p = x + u2
+            o = x * ch
+            da, ena, edla, eda = _step(srow[o + cau], cura[p] + ca_, nra[(x + oxau) & nm], tab)
+            db, enb, edlb, edb = _step(srow[o + cbu], curb[p] + cb_, nrb[(x + oxbu) & nm], tab)
+            drow[o + cau] = da
+            drow[o + cbu] = db
+            ca_ = ena
+            cb_ = enb
+            q = p - u1 if fwd else p + u1      # the row-below cell behind this pixel
+            nxta[q] = pa + edla
+            nxtb[q] = pb + edlb
+            pa = eda
+            pb = edb
+        if fwd:
             nxta[width + 1] = pa
             nxtb[width + 1] = pb
         else:
-            for x in range(width - 1, -1, -1):
-                p = x + 2
-                da, ena, edla, eda = _step(src[i, x, ca], cura[p] + ca_, nra[(x + oxa) & nm], tab)
-                db, enb, edlb, edb = _step(src[i, x, cb], curb[p] + cb_, nrb[(x + oxb) & nm], tab)
-                dst[i, x, ca] = da
-                dst[i, x, cb] = db
-                ca_ = ena
-                cb_ = enb
-                nxta[p + 1] = pa + edla
-                nxtb[p + 1] = pb + edlb
-                pa = eda
-                pb = edb
             nxta[2] = pa
             nxtb[2] = pb
         cura[:] = 0
