@@ -57,9 +57,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["OSTROMOUKHOV", "ZHOU_FANG_KEYS", "ZHOU_FANG_STRENGTH", "UNIT", "WEIGHT_BITS",
-           "MODULATION", "coefficient_table", "strength_table", "weight_tables",
-           "modulation_table"]
+__all__ = ["OSTROMOUKHOV", "ZHOU_FANG_KEYS", "ZHOU_FANG_STRENGTH", "TUNED_STRENGTH", "UNIT",
+           "WEIGHT_BITS", "MODULATION", "NEXT_BOOST", "VCDiffuser", "coefficient_table",
+           "strength_table", "weight_tables", "modulation_table", "structure_peak",
+           "tune_strength"]
 
 UNIT = 256          # error units per ink level
 WEIGHT_BITS = 16    # the weights are in 1/65536
@@ -467,7 +468,8 @@ def vc_twos(src, dst, err, row0, pairs, p0, p1, tab, noise, offs):  # pragma: no
 
 @njit(cache=True, nogil=True)
 def vc_pairs(src, dst, err, row0, pairs, p0, p1, wn, wdl, mod, noise, offs, lim, joint):  # pragma: no cover
-    """Pairs p0..p1-1 of ``pairs`` ((k, 2) int64 channel indices), each diffused jointly."""
+    """Pairs p0..p1-1 of ``pairs`` ((k, 2) int64 channel indices): jointly (``joint``, the
+    colour-aware decision) or as two independent inks."""
     for k in range(p0, p1):
         ca = pairs[k, 0]
         cb = pairs[k, 1]
@@ -493,8 +495,9 @@ class VCDiffuser:
     """Band-by-band variable-coefficient error diffusion of (rows, width, channels) uint8 ink.
 
     ``table``: "zhoufang" or "ostromoukhov" (the weights), the next pixel's weight times
-    ``next_boost``; ``strength``: "zhoufang" or "ostromoukhov" (= none) threshold modulation,
-    times ``scale``; ``noise``: (n, n) uint8 tile (n a power of two) read at the absolute
+    ``next_boost``; ``strength``: the threshold modulation per level, "tuned" (vced's),
+    "zhoufang", "ostromoukhov" (= none) or a (256,) array, times ``scale``; ``noise``: (n, n)
+    uint8 tile (n a power of two) read at the absolute
     position; ``joint``: the colour-aware decision for channels 0 and 1 (C with M); the
     others are diffused each on its own (two channels per loop all the same: their
     dependency chains overlap, ~1.5x the speed of one at a time).  State (error rows, the
@@ -512,6 +515,7 @@ class VCDiffuser:
         self.wn, self.wdl = weight_tables(coefficient_table(table, next_boost))
         st = strength_table(strength) if isinstance(strength, str) else np.asarray(strength, np.float64)
         self.mod = modulation_table(st, scale)
+        # per level: next weight, down-behind weight, modulation (and padding): one cache line
         self.tab = np.ascontiguousarray(np.stack([self.wn, self.wdl, self.mod, self.mod * 0], axis=1))
         self.err = np.zeros((self.channels, 2, self.width + 4), np.int32)
         self.row = 0
