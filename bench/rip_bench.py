@@ -8,7 +8,7 @@ side by side in one run, on the same generated RGB image (issue targets printed 
 What is measured (1 image pixel = 1 device pixel, 1-bit CMYK out, each run in a fresh process
 whose peak RSS is read from os.wait4's rusage):
 - wideprint: file -> swath words (RipJob(...).strokes(), every StrokeData.words made), 300 dpi,
-  1 pass, dither fs (error diffusion; the RGB input goes through the ICC separation), bayer
+  1 pass, dither fs and vced (error diffusion; the RGB input goes through the ICC separation), bayer
   and bluenoise (ordered).  The numba cache is warmed first by a tiny job in a separate
   process, and each timed process runs a tiny job of its own before the clock starts, so the
   time is the RIP's, not the interpreter's start-up or a JIT compile (start-up is shown apart).
@@ -53,7 +53,8 @@ TARGET_FS_VS_GS = 3.0       # ... and >= 3x Ghostscript tiffscaled4
 TARGET_ORDERED_MPX = 100.0  # ordered / blue noise, Mpx/s
 TARGET_RSS_MB = 400.0       # peak RSS for a 40,000 px wide image, whatever its length
 
-WIDEPRINT_METHODS = ("fs", "bayer", "bluenoise")
+WIDEPRINT_METHODS = ("fs", "bayer", "bluenoise", "vced")
+TARGET_VCED_VS_FS = 0.70    # issue 18: the default error diffusion at >= 70 % of fs's throughput
 PAGE_ROWS = 4000            # the test image repeats vertically every PAGE_ROWS rows (a banner
                             # of step-and-repeat pages) so that big images are cheap to write
 
@@ -491,6 +492,7 @@ def bench(args) -> None:
                     note = (f"best of {len(good)} ({times} s); "
                             f"RSS {info['rss_ready']:.0f} MB before the job (imports + warm-up)")
                     label = {"fs": "fs (ICC + FS)", "bayer": "bayer (ICC + ordered)",
+                             "vced": "vced (ICC + var. ED)",
                              "bluenoise": "bluenoise (ICC + ord.)"}[m]
                     print(fmt_row("wideprint", label, mpx, rip, note), flush=True)
                     res[("wideprint", m)] = (mpx / info["t"], rip)
@@ -528,7 +530,7 @@ def print_ratios(res, w: int) -> None:
     def rate(k):
         return res[k][0] if k in res else None
 
-    fs, bay, bn = (rate(("wideprint", m)) for m in WIDEPRINT_METHODS)
+    fs, bay, bn, vced = (rate(("wideprint", m)) for m in WIDEPRINT_METHODS)
     gs_ed = rate(("ghostscript", "tiffscaled4 (ED)"))
     gs_or = rate(("ghostscript", "bitcmyk (ordered)"))
     im_or = rate(("imagemagick", "ordered o8x8"))
@@ -546,6 +548,10 @@ def print_ratios(res, w: int) -> None:
          None if r is None else r >= TARGET_FS_VS_GS)
     if fs and im_fs:
         line("wideprint fs / ImageMagick Floyd-Steinberg", f"{fs / im_fs:.2f}x", "-", None)
+    line("wideprint vced (the default), Mpx/s", None if vced is None else f"{vced:.1f}", "-", None)
+    r = vced / fs if vced and fs else None
+    line("wideprint vced / fs", None if r is None else f"{r:.2f}x", f">= {TARGET_VCED_VS_FS:.2f}x",
+         None if r is None else r >= TARGET_VCED_VS_FS)
     for name, v in (("bayer", bay), ("bluenoise", bn)):
         line(f"wideprint {name}, Mpx/s", None if v is None else f"{v:.1f}", f">= {TARGET_ORDERED_MPX:.0f} Mpx/s",
              None if v is None else v >= TARGET_ORDERED_MPX)

@@ -143,6 +143,128 @@ def void_and_cluster(size: int = DEFAULT_SIZE, sigma: float = DEFAULT_SIGMA,
     return ranks.reshape(size, size).astype(dtype)
 
 
+# --------------------------------------------------------------------------
+# the screen mask: void-and-cluster on the anisotropic device grid, compiled
+# --------------------------------------------------------------------------
+
+SCREEN_SIZE = 256
+SCREEN_SIGMA = 1.5
+SCREEN_ASPECT = 370.5 / 300.0   # rows per inch / columns per inch of the device grid
+SCREEN_SEED = 0
+SCREEN_WIDE = 4.0               # plus 0.3 x a Gaussian of 4 px: fewer large voids and clusters
+SCREEN_WIDE_WEIGHT = 0.3
+
+
+def _local_kernel(sigma: float, aspect: float, wide: float = 0.0, wide_weight: float = 0.0) -> np.ndarray:
+    """The Gaussian of the energy, truncated where it is below 1e-9 of its peak: sigma
+    columns across, sigma * aspect rows along (isotropic in physical units), (2ry+1, 2rx+1);
+    plus ``wide_weight`` times a second Gaussian of sigma ``wide`` (if given)."""
+    big = max(sigma, wide if wide_weight else 0.0)
+    rx = int(np.ceil(big * np.sqrt(2 * np.log(1e9))))
+    ry = int(np.ceil(big * aspect * np.sqrt(2 * np.log(1e9))))
+    dy = np.arange(-ry, ry + 1, dtype=np.float64)[:, None]
+    dx = np.arange(-rx, rx + 1, dtype=np.float64)[None, :]
+
+    def g(s):
+        return np.exp(-(dx * dx) / (2 * s * s) - (dy * dy) / (2 * (s * aspect) ** 2))
+    k = g(sigma)
+    if wide and wide_weight:
+        k = k + wide_weight * g(wide)
+    return k
+
+
+def _vac_compiled():
+    from numba import njit
+
+    @njit(cache=True)
+    def add(energy, k, y, x, sign):  # pragma: no cover - compiled
+        h, w = energy.shape
+        ky, kx = k.shape
+        ry, rx = ky // 2, kx // 2
+        for j in range(ky):
+            yy = (y + j - ry) % h
+            for i in range(kx):
+                energy[yy, (x + i - rx) % w] += sign * k[j, i]
+
+    @njit(cache=True)
+    def extreme(energy, pattern, want_one):  # pragma: no cover - compiled
+        """Tightest cluster (max energy among ones) or largest void (min among zeros);
+        ties: the lowest flat index."""
+        best = -1
+        bv = 0.0
+        flat_e = energy.reshape(-1)
+        flat_p = pattern.reshape(-1)
+        for idx in range(flat_e.size):
+            if flat_p[idx] == want_one:
+                v = flat_e[idx]
+                if best < 0 or (want_one and v > bv) or ((not want_one) and v < bv):
+                    best = idx
+                    bv = v
+        return best
+
+    @njit(cache=True)
+    def run(pattern, k, ones):  # pragma: no cover - compiled
+        h, w = pattern.shape
+        n = h * w
+        energy = np.zeros((h, w))
+        for idx in range(n):
+            if pattern.reshape(-1)[idx]:
+                add(energy, k, idx // w, idx % w, 1.0)
+        # 1. relax: move the tightest cluster to the largest void until it stays
+        for _ in range(100 * n):
+            c = extreme(energy, pattern, True)
+            pattern.reshape(-1)[c] = False
+            add(energy, k, c // w, c % w, -1.0)
+            v = extreme(energy, pattern, False)
+            pattern.reshape(-1)[v] = True
+            add(energy, k, v // w, v % w, 1.0)
+            if v == c:
+                break
+        ranks = np.full(n, n, np.int64)
+        proto = pattern.copy()
+        e0 = energy.copy()
+        # 2. phase 1: remove tightest clusters, ranks ones-1 .. 0
+        for rank in range(ones - 1, -1, -1):
+            c = extreme(energy, pattern, True)
+            pattern.reshape(-1)[c] = False
+            add(energy, k, c // w, c % w, -1.0)
+            ranks[c] = rank
+        # 3. phases 2 and 3: fill largest voids, ranks ones .. n-1
+        pattern[:, :] = proto
+        energy[:, :] = e0
+        for rank in range(ones, n):
+            v = extreme(energy, pattern, False)
+            pattern.reshape(-1)[v] = True
+            add(energy, k, v // w, v % w, 1.0)
+            ranks[v] = rank
+        return ranks
+
+    return run
+
+
+def screen_mask(size: int = SCREEN_SIZE, sigma: float = SCREEN_SIGMA,
+                aspect: float = SCREEN_ASPECT, seed: int = SCREEN_SEED,
+                initial_fraction: float = 0.1, wide: float = SCREEN_WIDE,
+                wide_weight: float = SCREEN_WIDE_WEIGHT) -> np.ndarray:
+    """Void-and-cluster rank mask for the device grid: the energy's Gaussian is sigma
+    columns across and sigma * aspect rows along, so the dots are evenly spread in
+    *physical* distance on the 300 x 370.5 dpi grid (a square-pixel mask is squeezed along
+    the feed there).  Otherwise as ``void_and_cluster`` (compiled: about a minute for 256)."""
+    if size < 2:
+        raise ValueError("size must be >= 2")
+    n = size * size
+    rng = np.random.default_rng(seed)
+    ones = max(1, int(n * initial_fraction))
+    pattern = np.zeros((size, size), dtype=np.bool_)
+    pattern.reshape(-1)[rng.choice(n, size=ones, replace=False)] = True
+    k = _local_kernel(sigma, aspect, wide, wide_weight)
+    if k.shape[0] > size or k.shape[1] > size:
+        raise ValueError("sigma too large for the mask size")
+    ranks = _vac_compiled()(pattern, k, ones)
+    check_permutation(ranks)
+    return ranks.reshape(size, size).astype(np.uint16 if n <= 1 << 16 else np.uint32)
+
+
 def check_permutation(ranks: np.ndarray) -> None:
     """Raise ValueError unless ``ranks`` holds every value 0..ranks.size-1 exactly once."""
     flat = np.asarray(ranks).reshape(-1).astype(np.int64)
@@ -158,16 +280,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", type=int, default=DEFAULT_SIZE, help="tile side in pixels (default 128)")
     ap.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, help="Gaussian filter sigma (default 1.5)")
     ap.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the initial random pattern (default 0)")
+    ap.add_argument("--screen", action="store_true",
+                    help="the screen mask: compiled void-and-cluster on the device grid "
+                         "(--aspect, default 370.5/300; resources/masks/bluenoise256.npy is "
+                         "--screen --size 256 --sigma 1.5 --seed 0)")
+    ap.add_argument("--aspect", type=float, default=SCREEN_ASPECT,
+                    help="with --screen: rows per column of equal physical length")
+    ap.add_argument("--wide", type=float, default=SCREEN_WIDE,
+                    help="with --screen: sigma of the second, wide Gaussian (default 4)")
+    ap.add_argument("--wide-weight", type=float, default=SCREEN_WIDE_WEIGHT,
+                    help="with --screen: its weight (default 0.3; 0: a single Gaussian)")
     ap.add_argument("--out", type=Path, required=True, help="output .npy path")
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
-    mask = void_and_cluster(args.size, args.sigma, args.seed)
+    if args.screen:
+        mask = screen_mask(args.size, args.sigma, args.aspect, args.seed, wide=args.wide,
+                           wide_weight=args.wide_weight)
+    else:
+        mask = void_and_cluster(args.size, args.sigma, args.seed)
     dt = time.perf_counter() - t0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     np.save(args.out, mask)
     print(f"wrote {args.out}: {mask.shape} {mask.dtype}, ranks 0..{mask.size - 1}, "
-          f"sigma={args.sigma}, seed={args.seed}, {dt:.1f} s")
+          f"sigma={args.sigma}, seed={args.seed}"
+          f"{f', aspect={args.aspect:.6g}, wide={args.wide:g} x {args.wide_weight:g}' if args.screen else ''}"
+          f", {dt:.1f} s")
     return 0
 
 

@@ -13,6 +13,16 @@ per image (or per page): it is not meant to be called from two threads at once.
 
 Methods (``METHODS``)
 ---------------------
+``vced`` (the default), ``vector``: variable-coefficient error diffusion with
+threshold modulation (rip/diffusion.py: Zhou-Fang's weights, the next pixel's
+weight x 1.15 for the 300 x 370.5 grid, a blue-noise modulation from the screen
+mask tuned per level to leave no periodic structure).  ``vced`` diffuses every
+ink on its own; ``vector`` decides C and M jointly (at most one of the two
+dots where C + M <= 100 %, at least one beyond; the pair's dots form one
+blue-noise pattern), Y and K on their own.  Serpentine on the absolute row,
+integer arithmetic, the error rows kept between bands as for ``fs``: identical
+bits for any band split.  Ink 0 never gets a drop, ink 255 always one.
+
 ``fs``, ``jarvis``, ``stucki``: error diffusion (Floyd-Steinberg 1976,
 Jarvis-Judice-Ninke 1976, Stucki 1981) with a serpentine scan: image rows with
 an even *absolute* row index go left to right, odd ones right to left (the
@@ -40,9 +50,11 @@ input in two channels gives the same bits).  ``seed`` does not affect error
 diffusion.
 
 ``bayer``, ``bluenoise``: ordered dither with a threshold mask of n x n ranks
-(N = n*n): the 16x16 recursive Bayer index matrix, or the shipped 128x128
-void-and-cluster blue-noise mask ``resources/masks/bluenoise128.npy`` (see
-:mod:`wideprint.rip.bluenoise`).  A pixel gets a drop when
+(N = n*n): the 16x16 recursive Bayer index matrix, or the shipped 256x256
+blue-noise screen mask ``resources/masks/bluenoise256.npy`` (void-and-cluster on
+the anisotropic device grid, see :mod:`wideprint.rip.bluenoise` and
+resources/masks/README.md; the 128x128 ``bluenoise128.npy`` is the pass masks'
+tile, rip/swath.py).  A pixel gets a drop when
 ``ink * N > rank * 255 + 127``, precomputed as an 8-bit threshold
 ``T = (rank * 255 + 127) // N`` with ``drop = ink > T``.  So ink 0 gives no
 drops, 255 gives all, and a constant ink v gives ``ceil((v N - 127) / 255)``
@@ -50,30 +62,36 @@ drops per tile, i.e. round(v N / 255) (the floor or the ceiling of v N / 255).
 The tile phase is the absolute row index (kept across bands) and the column
 index within the band's width.
 
-Channel decorrelation (ordered methods): channel ``k`` reads the mask shifted
-by ``(ox_k, oy_k)``, i.e. threshold at (row y, column x) is
-``T[(y + oy_k) % n, (x + ox_k) % n]``.  With ``seed=0`` (the default)::
+Channel layout, ``bluenoise`` (``screen_layout``): channel k reads the mask
+shifted by ``(ox_k, oy_k)``, i.e. threshold at (row y, column x) is
+``T_k[(y + oy_k) % n, (x + ox_k) % n]``, where ``T_k`` is the mask's threshold
+tile for even k and the *inverted* mask's (rank N-1-r) for odd k.  So C and M
+(and Y and K) are complementary: C's dots are the mask's lowest ranks, M's its
+highest, and where C + M <= 100 % no C dot lands on an M dot (beyond, they
+overlap as little as possible, C + M - 100 %).  The pairs are half a tile apart:
+(ox, oy) = (0, 0) for C and M, (128, 128) for Y and K, so C and M are
+uncorrelated with Y and K (no moire).  With ``seed != 0`` each pair's offset is
+drawn from ``numpy.random.default_rng(seed)``.
+
+Channel layout, ``bayer`` (``mask_offsets``): channel ``k`` reads the matrix
+shifted by ``(ox_k, oy_k)``.  With ``seed=0`` (the default)::
 
     ox_k = (n * k // 4 + 17 * k) % n
     oy_k = (n * k // 2 + 17 * (k // 2)) % n
 
-For the 128 blue-noise tile that is (0,0), (49,64), (98,17), (19,81): every
-pair of channels is at least 30 px apart on the torus, far beyond the mask's
-few-pixel correlation length, so the C, M, Y, K dot patterns are uncorrelated
-(they overlap as often as independent patterns would) and cannot beat against
-each other (no moire).  For the 16x16 Bayer tile it is (0,0), (5,8), (10,1),
-(15,9), whose phases mod 2 are the four different (0|1, 0|1): at 25 % ink the
-four channels' lattices are disjoint (dot beside dot, not dot on dot); at
-exactly 50 % Bayer has only two checkerboards, so channels 0 and 3 and
-channels 1 and 2 coincide there while 0 and 1 are complementary.  With
-``seed != 0`` the offsets are drawn from
+For the 16x16 Bayer tile it is (0,0), (5,8), (10,1), (15,9), whose phases mod 2
+are the four different (0|1, 0|1): at 25 % ink the four channels' lattices are
+disjoint (dot beside dot, not dot on dot); at exactly 50 % Bayer has only two
+checkerboards, so channels 0 and 3 and channels 1 and 2 coincide there while 0
+and 1 are complementary.  With ``seed != 0`` the offsets are drawn from
 ``numpy.random.default_rng(seed).integers(0, n, size=(channels, 2))`` as
 ``(ox_k, oy_k)`` rows.
 
 Speed: the kernels are numba ``@njit(cache=True, nogil=True)``, no Python
 per pixel.  Work is split over a small shared ``ThreadPoolExecutor`` (2
 workers, the machine has 2 cores): error diffusion gives each worker a group
-of planes (one kernel call loops over its planes), ordered dither gives each
+of planes (one kernel call loops over its planes; ``vced`` diffuses two planes
+in one loop, so their dependency chains overlap), ordered dither gives each
 worker a block of rows.  Measured against numba ``prange`` over planes on
 8000x2000x4 FS: about the same (medians within a few %; the machine is noisy).
 Threads were kept because they do not depend on numba's threading layer
@@ -95,13 +113,18 @@ from numba import njit
 
 from .parallel import WORKERS, run_parallel
 
-__all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "mask_offsets",
-           "threshold_tile"]
+__all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "load_screen_mask",
+           "mask_offsets", "screen_layout", "threshold_tile"]
 
 from .settings import METHODS, ORDERED  # noqa: E402 - declared with the settings schema
 ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
-BLUENOISE_PATH = Path(__file__).resolve().parent.parent / "resources" / "masks" / "bluenoise128.npy"
+MASKS = Path(__file__).resolve().parent.parent / "resources" / "masks"
+BLUENOISE_PATH = MASKS / "bluenoise128.npy"       # the pass masks' tile (rip/swath.py)
+SCREEN_PATH = MASKS / "bluenoise256.npy"          # the bluenoise screen and vced's modulation
+#: error diffusion with variable coefficients (rip/diffusion.py): independent channels, and
+#: colour-aware pairs (C with M, Y with K)
+VARIABLE = ("vced", "vector")
 
 # 5-wide, 3-row diffusion kernels, scan direction left to right, "*" is the
 # current pixel:             [*, x+1, x+2], row+1: [x-2..x+2], row+2: [x-2..x+2]
@@ -309,8 +332,24 @@ def _bluenoise_cached(path: str) -> np.ndarray:
 
 
 def load_bluenoise_mask(path: str | os.PathLike | None = None) -> np.ndarray:
-    """The shipped 128x128 blue-noise rank mask (read-only, cached)."""
+    """The shipped 128x128 blue-noise rank mask (read-only, cached): the pass masks' tile."""
     return _bluenoise_cached(str(BLUENOISE_PATH if path is None else path))
+
+
+def load_screen_mask(path: str | os.PathLike | None = None) -> np.ndarray:
+    """The shipped 256x256 screen rank mask (read-only, cached): the ``bluenoise`` screen
+    and the threshold modulation of ``vced`` / ``vector`` (resources/masks/README.md)."""
+    return _bluenoise_cached(str(SCREEN_PATH if path is None else path))
+
+
+@functools.lru_cache(maxsize=None)
+def modulation_noise() -> np.ndarray:
+    """The screen mask as uint8 noise 0..255 (each value on n*n/256 pixels): the threshold
+    modulation of the variable-coefficient error diffusion."""
+    ranks = load_screen_mask().astype(np.int64)
+    noise = (ranks * 256 // ranks.size).astype(np.uint8)
+    noise.setflags(write=False)
+    return noise
 
 
 def mask_offsets(size: int, channels: int, seed: int = 0) -> np.ndarray:
@@ -321,6 +360,28 @@ def mask_offsets(size: int, channels: int, seed: int = 0) -> np.ndarray:
         oy = (size * k // 2 + 17 * (k // 2)) % size
         return np.stack([ox, oy], axis=1)
     return np.random.default_rng(seed).integers(0, size, size=(channels, 2)).astype(np.int64)
+
+
+def screen_layout(size: int, channels: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The blue-noise screen's channel layout: (channels, 2) offsets (ox, oy) and (channels,)
+    inversion flags.  Channels come in pairs (C with M, Y with K, ...): the second of a pair
+    reads the *inverted* mask (rank N-1-r) at the same offset, so where the pair's inks sum to
+    at most full coverage their dots never coincide (C's dots are the mask's lowest ranks, M's
+    its highest), and beyond that they overlap as little as possible; pair j reads the mask
+    shifted by (ox, oy) = (j n/2 + 37 (j//2), j n/2 + 53 (j//2)) mod n, so C and M are
+    uncorrelated with Y and K (half a tile apart).  ``seed != 0``: the pairs' offsets are drawn
+    from ``numpy.random.default_rng(seed)`` instead."""
+    k = np.arange(channels, dtype=np.int64)
+    pair = k // 2
+    if seed == 0:
+        ox = (size // 2 * pair + 37 * (pair // 2)) % size
+        oy = (size // 2 * pair + 53 * (pair // 2)) % size
+        offsets = np.stack([ox, oy], axis=1)
+    else:
+        drawn = np.random.default_rng(seed).integers(0, size, size=((channels + 1) // 2, 2))
+        offsets = drawn[pair].astype(np.int64)
+    invert = k % 2 == 1
+    return offsets, invert
 
 
 def threshold_tile(ranks: np.ndarray) -> np.ndarray:
@@ -364,15 +425,27 @@ class Halftoner:
             self._err = np.zeros((channels, 2, width + 2 * _PAD), dtype=np.int32)
         elif method in _KERNELS_5X3:
             self._err = np.zeros((channels, 3, width + 2 * _PAD), dtype=np.int32)
+        elif method in VARIABLE:
+            from .diffusion import VCDiffuser
+            self._vc = VCDiffuser(width, channels, modulation_noise(), joint=method == "vector")
+            self._err = self._vc.err
         else:
-            ranks = bayer_matrix(16) if method == "bayer" else load_bluenoise_mask()
-            n = ranks.shape[0]
+            if method == "bayer":
+                ranks = bayer_matrix(16)
+                n = ranks.shape[0]
+                self.offsets = mask_offsets(n, channels, self.seed)
+                self.inverted = np.zeros(channels, dtype=bool)
+            else:
+                ranks = load_screen_mask()
+                n = ranks.shape[0]
+                self.offsets, self.inverted = screen_layout(n, channels, self.seed)
             self.mask_size = n
-            self.offsets = mask_offsets(n, channels, self.seed)
             t = threshold_tile(ranks)
+            t_inv = threshold_tile((ranks.size - 1 - ranks.astype(np.int64)))
             tile = np.empty((n, n, channels), dtype=np.uint8)
             for k, (ox, oy) in enumerate(self.offsets):
-                tile[:, :, k] = np.roll(t, (-int(oy), -int(ox)), axis=(0, 1))  # tile[y, x] = t[y+oy, x+ox]
+                tk = t_inv if self.inverted[k] else t
+                tile[:, :, k] = np.roll(tk, (-int(oy), -int(ox)), axis=(0, 1))  # tile[y, x] = t[y+oy, x+ox]
             self._thr = np.ascontiguousarray(tile.reshape(n, n * channels))
 
     @property
@@ -416,6 +489,14 @@ class Halftoner:
                 functools.partial(_ordered_rows, src[a:b], dst[a:b], thr, row0 + a)
                 for a, b in zip(bounds[:-1], bounds[1:]) if b > a
             )
+        elif self.method in VARIABLE:
+            groups = WORKERS if parallel else 1
+            if groups > 1:
+                out.reshape(-1)[::4096] = 0   # fault the pages in here (see below)
+            src = band if band.flags.c_contiguous else np.ascontiguousarray(band)
+            self._vc.row = row0
+            _run_parallel(self._vc.jobs(src, out, groups))
+            self._vc.row = row0 + rows
         else:
             kernel = _fs_planes if self.method == "fs" else _ED5X3_PLANES[self.method]
             groups = min(WORKERS, self.channels) if parallel else 1

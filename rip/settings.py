@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Callable
 
 # -- the choices (the RIP's modules import these names from here) ------------------------
-METHODS = ("fs", "jarvis", "stucki", "bayer", "bluenoise")      # rip/halftone.py
+METHODS = ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise")   # rip/halftone.py
 ORDERED = ("bayer", "bluenoise")                                 # screens, not diffusion
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)                                 # rip/swath.py weaves
 PASS_MASKS = ("checker", "random", "feather")                    # rip/swath.py
@@ -141,10 +141,15 @@ SETTINGS: tuple[Setting, ...] = (
             choices=PASS_MASKS, label="Pass mask",
             labels={"checker": "Checkerboard", "random": "Random (blue noise)",
                     "feather": "Feathered edges"}),
-    Setting("dither", str, "fs", "halftone: error diffusion (fs, jarvis, stucki) or an "
-            "ordered screen (bayer, bluenoise)", choices=METHODS, label="Halftone",
-            labels={"fs": "Floyd–Steinberg", "jarvis": "Jarvis–Judice–Ninke", "stucki": "Stucki",
-                    "bayer": "Bayer 16×16 (ordered)", "bluenoise": "Blue noise (ordered)"}),
+    Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
+            "with threshold modulation, the best for photographs; vector: the same with C and M, "
+            "Y and K dots kept apart, the least grain in light mixed colours; fs, jarvis, stucki) "
+            "or an ordered screen (bluenoise: the fastest, dots of C and M apart; bayer)",
+            choices=METHODS, label="Halftone",
+            labels={"vced": "Variable-coefficient ED (photo)",
+                    "vector": "Colour-aware ED (C/M, Y/K dots apart)",
+                    "fs": "Floyd–Steinberg", "jarvis": "Jarvis–Judice–Ninke", "stucki": "Stucki",
+                    "bayer": "Bayer 16×16 (ordered)", "bluenoise": "Blue noise 256 (ordered, fastest)"}),
     Setting("ink_limit", float, None, "total ink limit in percent of one full channel "
             "(default: the printer profile's, for RGB and grey input)", nullable=True,
             minimum=1, maximum=400, label="Ink limit", metavar="PERCENT"),
@@ -388,7 +393,7 @@ class RipSettings:
     dpi: int = 300
     passes: int = 1              # interleave passes of the weave (not carriage strokes)
     bidir: bool = False
-    dither: str = "fs"
+    dither: str = "vced"
     pass_mask: str = "checker"
     ink_limit: float | None = None
     input_icc: str | None = None

@@ -12,7 +12,9 @@ from wideprint.rip.halftone import (
     Halftoner,
     bayer_matrix,
     load_bluenoise_mask,
+    load_screen_mask,
     mask_offsets,
+    screen_layout,
 )
 
 ED_METHODS = ("fs", "jarvis", "stucki")
@@ -20,7 +22,7 @@ ORDERED_METHODS = ("bayer", "bluenoise")
 
 
 def test_methods_tuple_is_the_published_interface():
-    assert METHODS == ("fs", "jarvis", "stucki", "bayer", "bluenoise")
+    assert METHODS == ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise")
 
 
 def halftone_in_bands(method, img, heights, seed=0):
@@ -202,7 +204,7 @@ def test_gradient_density(method):
 def test_ordered_exact_count_per_tile(method):
     """For a constant ink v every n x n tile (any phase) has exactly
     ceil((v N - 127) / 255) drops, i.e. floor or ceil of v N / 255."""
-    n = 16 if method == "bayer" else 128
+    n = 16 if method == "bayer" else 256
     N = n * n
     values = np.arange(256, dtype=np.uint8)
     # one channel per value would be 256 channels: use 4 channels, 64 passes
@@ -363,18 +365,24 @@ def test_default_offsets_are_documented_ones():
 
 
 def test_ordered_threshold_layout_matches_offsets():
-    """Channel k, pixel (y, x) has a drop iff v*N > rank[(y+oy)%n, (x+ox)%n]*255 + 127."""
-    ranks = load_bluenoise_mask().astype(np.int64)
-    n, N = 128, 128 * 128
-    v = 90
-    img = np.full((150, 140, 4), v, np.uint8)
-    h = Halftoner("bluenoise", 140, 4)
-    out = np.concatenate([h.process(img[:61]), h.process(img[61:])])
-    y = np.arange(150)[:, None]
-    x = np.arange(140)[None, :]
-    for k, (ox, oy) in enumerate(mask_offsets(n, 4)):
-        r = ranks[(y + oy) % n, (x + ox) % n]
-        assert np.array_equal(out[:, :, k], (v * N > r * 255 + 127).astype(np.uint8)), k
+    """Channel k, pixel (y, x) has a drop iff v*N > r_k[(y+oy)%n, (x+ox)%n]*255 + 127, with
+    r_k the screen mask, inverted (N-1-r) for the second channel of each pair."""
+    ranks = load_screen_mask().astype(np.int64)
+    n, N = 256, 256 * 256
+    offsets, inverted = screen_layout(n, 4)
+    assert offsets.tolist() == [[0, 0], [0, 0], [128, 128], [128, 128]]
+    assert inverted.tolist() == [False, True, False, True]
+    for v in (90, 200):
+        img = np.full((300, 290, 4), v, np.uint8)
+        h = Halftoner("bluenoise", 290, 4)
+        out = np.concatenate([h.process(img[:61]), h.process(img[61:])])
+        y = np.arange(300)[:, None]
+        x = np.arange(290)[None, :]
+        for k, (ox, oy) in enumerate(offsets):
+            r = ranks[(y + oy) % n, (x + ox) % n]
+            if inverted[k]:
+                r = N - 1 - r
+            assert np.array_equal(out[:, :, k], (v * N > r * 255 + 127).astype(np.uint8)), (v, k)
 
 
 @pytest.mark.parametrize("method", ORDERED_METHODS)
@@ -398,16 +406,23 @@ def test_bayer_channels_interleave():
     assert (out[:, :, 0] != out[:, :, 1]).mean() > 0.98
 
 
-def test_bluenoise_channels_are_uncorrelated():
-    """At ~25 % ink two channels overlap about 25 % x 25 % of the time, as
-    independent patterns would (identical patterns would overlap 25 %)."""
-    img = np.full((256, 256, 4), 64, np.uint8)
-    out = Halftoner("bluenoise", 256, 4).process(img).astype(np.float64)
+def test_bluenoise_channel_relations():
+    """C and M (and Y and K) are complementary: where the pair's inks sum to at most full
+    coverage their dots never coincide, beyond it they overlap as little as possible
+    (c + m - 1).  Across the pairs the patterns are uncorrelated: at ~25 % ink a C and a Y
+    dot coincide about 25 % x 25 % of the time, as independent patterns would."""
+    for v in (13, 64, 127):
+        out = Halftoner("bluenoise", 256, 4).process(np.full((256, 256, 4), v, np.uint8))
+        assert not (out[:, :, 0] & out[:, :, 1]).any(), v
+        assert not (out[:, :, 2] & out[:, :, 3]).any(), v
+    out = Halftoner("bluenoise", 256, 4).process(np.full((256, 256, 4), 180, np.uint8))
+    both = (out[:, :, 0] & out[:, :, 1]).mean()
+    assert abs(both - (2 * 180 / 255 - 1)) < 0.002, both         # the least possible overlap
+    out = Halftoner("bluenoise", 256, 4).process(np.full((256, 256, 4), 64, np.uint8)).astype(np.float64)
     p = out.mean()
-    for i in range(4):
-        for j in range(i + 1, 4):
-            both = (out[:, :, i] * out[:, :, j]).mean()
-            assert abs(both - p * p) < 0.015, (i, j, both, p * p)
+    for i, j in ((0, 2), (0, 3), (1, 2), (1, 3)):
+        both = (out[:, :, i] * out[:, :, j]).mean()
+        assert abs(both - p * p) < 0.015, (i, j, both, p * p)
 
 
 @pytest.mark.parametrize("method", ORDERED_METHODS)

@@ -56,7 +56,7 @@ def test_command_line_gives_only_what_was_typed():
     rs = S.from_mapping(m, load_profile())
     assert (rs.dpi, rs.passes, rs.bidir, rs.ink_limit) == (150, 4, False, 280.0)
     assert rs.placement.align == "center" and rs.placement.x_mm == -12.5
-    assert rs.dither == "fs" and rs.placement.size == "physical"         # schema defaults
+    assert rs.dither == "vced" and rs.placement.size == "physical"       # schema defaults
 
 
 @pytest.mark.parametrize("mapping, phrase", [
@@ -68,7 +68,7 @@ def test_command_line_gives_only_what_was_typed():
     ({"bidir": 1}, "bidir must be true or false"),
     ({"ink_limit": 0.5}, "ink_limit 0.5 is out of range (1..400)"),
     ({"ink_limit": float("nan")}, "ink_limit must be a finite number"),
-    ({"dither": "magic"}, "dither must be one of fs, jarvis"),
+    ({"dither": "magic"}, "dither must be one of vced, vector, fs, jarvis"),
     ({"intent": 3}, "intent must be a string"),
     ({"input_icc": 7}, "input_icc must be a string"),
     ({"placement": {"rotate": 45}}, "placement rotate must be one of 0, 90, 180, 270"),
