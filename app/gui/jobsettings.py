@@ -48,7 +48,7 @@ class JobSettings:
     dpi: int = 300
     passes: int = 1
     bidir: bool = False
-    dither: str = "fs"
+    dither: str = setting("dither").default        # the schema's default halftone
     pass_mask: str = "checker"        # which pass prints which dot (rip/swath.py PASS_MASKS)
     input_icc: str = ""
     output_icc: str = ""

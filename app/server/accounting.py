@@ -9,6 +9,9 @@ import logging
 import time
 
 from .spool import COLORS
+from ...rip.settings import setting
+
+DEFAULT_DITHER = setting("dither").default     # a job that named none was printed with it
 
 log = logging.getLogger("wideprint.server")
 
@@ -34,7 +37,7 @@ def prints_csv(rows: list[dict]) -> str:
         ink = [r[f"ink_{c}_ml"] for c in COLORS]
         w.writerow([r["id"], r["job_id"], r["copy"], r["file"], r["source"], r["preset"] or "",
                     r["settings"], s.get("dpi", 300), s.get("passes", 1),
-                    int(bool(s.get("bidir", False))), s.get("dither", "fs"),
+                    int(bool(s.get("bidir", False))), s.get("dither", DEFAULT_DITHER),
                     _iso(r["started"]), _iso(r["ended"]), f"{r['duration_s']:.3f}",
                     r["strokes_total"], r["strokes_printed"], r["width_dots"], r["height_rows"],
                     f"{r['area_m2']:.10f}", *(r[f"drops_{c}"] for c in COLORS),

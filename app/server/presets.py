@@ -17,7 +17,7 @@ log = logging.getLogger("wideprint.server")
 
 DEFAULT_PRESETS = {
     "default": {},
-    "photo": {"passes": 4, "bidir": False, "dither": "fs", "dpi": 300},
+    "photo": {"passes": 4, "bidir": False, "dither": "vced", "dpi": 300},
     "banner": {"passes": 2, "bidir": True, "dither": "bayer", "dpi": 300},
 }
 
