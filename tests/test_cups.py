@@ -25,7 +25,7 @@ DEBIAN_PACKAGES = ["cups-daemon", "cups-client", "cups-bsd"]
 
 def _cups_missing() -> str | None:
     """Why cupsd cannot run here (None: it can).  A test never installs anything: CI's
-    .ci/run installs the Debian packages; elsewhere this test skips and says so."""
+    .ci/run installs the Debian packages; elsewhere this test fails and says what is missing."""
     missing = [t for t in ("/usr/sbin/cupsd", "lpadmin", "lp", "lpstat")
                if not (shutil.which(t) or Path(t).exists())]
     if not (CUPS_LIB / "daemon" / "cups-exec").exists():
@@ -59,7 +59,7 @@ def wideprint_server(tmp_path_factory):
 def cupsd(tmp_path_factory):
     why = _cups_missing()
     if why:
-        pytest.skip(why)
+        pytest.fail(why)                    # a missing dependency fails loudly, never a skip
     if os.geteuid() != 0:
         pytest.skip("the private cupsd runs the backend as root (its token is 0600); run as root")
     d = tmp_path_factory.mktemp("cups")
@@ -212,7 +212,8 @@ def test_lp_prints_a_pdf_through_cups(queue, wideprint_server, tmp_path):
     """PDF passes through CUPS unfiltered (the PPD's cupsFilter2) and is ripped by the
     server through Ghostscript: the media equals the planes `wideprint rip` makes of it."""
     if not shutil.which("gs"):
-        pytest.skip("Ghostscript (gs) is not installed")
+        pytest.fail("Ghostscript (gs) is not installed: resources/debian-packages.txt lists it "
+                    "and .ci/run installs it")
     from wideprint.rip.pipeline import RipJob, RipSettings
     from wideprint.rip.profile import load_profile
     ps = tmp_path / "flyer.ps"

@@ -24,9 +24,16 @@ from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.planes import read_planes
 from wideprint.rip.settings import Placement
 
-pytestmark = pytest.mark.skipif(not any(os.access(os.path.join(p, "gs"), os.X_OK)
-                                        for p in os.environ.get("PATH", "").split(os.pathsep)),
-                                reason="Ghostscript (gs) is not installed")
+
+
+@pytest.fixture(autouse=True)
+def _ghostscript():
+    """Ghostscript is a dependency of the product (resources/debian-packages.txt, installed
+    by .ci/run): without it these tests fail, loudly, rather than skip."""
+    if not any(os.access(os.path.join(p, "gs"), os.X_OK)
+               for p in os.environ.get("PATH", "").split(os.pathsep)):
+        pytest.fail("Ghostscript (gs) is not installed: apt-get install ghostscript "
+                    "(.ci/run does)")
 
 YPI = 25400 / 68.55                      # the default profile's rows per inch
 RES = f"-r300x{YPI:.6f}"                 # the device grid at 300 dpi, as Ghostscript takes it
