@@ -305,7 +305,7 @@ def _pair_decide(la, lb, va, vb, ta, tb, t):
 
 
 @njit(cache=True, nogil=True)
-def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, oxb, oyb, lim, joint):  # pragma: no cover
+def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, oxb, oyb, lim):  # pragma: no cover
     rows, width = src.shape[0], src.shape[1]
     ch = np.uint64(src.shape[2])
     u1, u2 = np.uint64(1), np.uint64(2)
@@ -343,28 +343,22 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, noise, oxa, oya, 
             vb = np.int64(lb) * _U + ab
             ta = _T0 + mod[la] * (np.int64(nra[(x + oxau) & nm]) - 128)
             tb = _T0 + mod[lb] * (np.int64(nrb[(x + oxbu) & nm]) - 128)
-            if joint:
-                # The pair's combined process - the sum of the two values, one dot or none
-                # (a + b <= 255), one or two (a + b > 255) - is itself a variable-coefficient
-                # diffusion at level a + b (or a + b - 255): its threshold is modulated for
-                # that level and both inks' errors go with that level's weights, so the two
-                # inks' dots together form that level's pattern (measured: 35-50 % less grain
-                # in light C = M tints than with each ink's own weights).
-                lc = np.int64(la) + np.int64(lb)
-                if lc > 255:
-                    lc -= 255
-                t = _T0 + mod[lc] * (np.int64(nra[(x + oxbu) & nm]) - 128)
-                oa, ob = _pair_decide(la, lb, va, vb, ta, tb, t)
-                if 16 <= lc <= 239:
-                    ka = lc
-                    kb = lc
-                else:   # the pair's pattern is (almost) empty or full: what shows is which
-                    ka = np.int64(la)   # ink each dot is, so each ink keeps its own weights
-                    kb = np.int64(lb)
-            else:               # two independent inks in one loop: their chains overlap
-                oa = 1 if va >= ta else 0
-                ob = 1 if vb >= tb else 0
-                ka = np.int64(la)
+            # The pair's combined process - the sum of the two values, one dot or none
+            # (a + b <= 255), one or two (a + b > 255) - is itself a variable-coefficient
+            # diffusion at level a + b (or a + b - 255): its threshold is modulated for
+            # that level and both inks' errors go with that level's weights, so the two
+            # inks' dots together form that level's pattern (measured: 35-50 % less grain
+            # in light C = M tints than with each ink's own weights).
+            lc = np.int64(la) + np.int64(lb)
+            if lc > 255:
+                lc -= 255
+            t = _T0 + mod[lc] * (np.int64(nra[(x + oxbu) & nm]) - 128)
+            oa, ob = _pair_decide(la, lb, va, vb, ta, tb, t)
+            if 16 <= lc <= 239:
+                ka = lc
+                kb = lc
+            else:   # the pair's pattern is (almost) empty or full: what shows is which
+                ka = np.int64(la)   # ink each dot is, so each ink keeps its own weights
                 kb = np.int64(lb)
             drow[o + cau] = oa
             drow[o + cbu] = ob
@@ -467,14 +461,14 @@ def vc_twos(src, dst, err, row0, pairs, p0, p1, tab, noise, offs):  # pragma: no
 
 
 @njit(cache=True, nogil=True)
-def vc_pairs(src, dst, err, row0, pairs, p0, p1, wn, wdl, mod, noise, offs, lim, joint):  # pragma: no cover
-    """Pairs p0..p1-1 of ``pairs`` ((k, 2) int64 channel indices): jointly (``joint``, the
-    colour-aware decision) or as two independent inks."""
+def vc_pairs(src, dst, err, row0, pairs, p0, p1, wn, wdl, mod, noise, offs, lim):  # pragma: no cover
+    """Pairs p0..p1-1 of ``pairs`` ((k, 2) int64 channel indices), each decided jointly (the
+    colour-aware decision; independent inks go through ``vc_twos``)."""
     for k in range(p0, p1):
         ca = pairs[k, 0]
         cb = pairs[k, 1]
         _vc_pair(src, dst, ca, cb, err[ca], err[cb], row0, wn, wdl, mod, noise,
-                 offs[ca, 0], offs[ca, 1], offs[cb, 0], offs[cb, 1], lim, joint)
+                 offs[ca, 0], offs[ca, 1], offs[cb, 0], offs[cb, 1], lim)
 
 
 # --------------------------------------------------------------------------
@@ -542,7 +536,7 @@ class VCDiffuser:
                 for kind, k in chunk:
                     if kind == "pair" and self.joint and k == 0:       # C with M only
                         vc_pairs(band, out, self.err, row0, self.pairs, k, k + 1, *args,
-                                 self.lim, True)
+                                 self.lim)
                     elif kind == "pair":
                         vc_twos(band, out, self.err, row0, self.pairs, k, k + 1, self.tab,
                                 self.noise, self.offsets)
