@@ -80,6 +80,35 @@ DEFAULT = _Config("bits", SIMPLE_COLOURS[1][0], SIMPLE_COLOURS[1][1])
 OK, TRUNCATED, TOO_LONG, ODD_RLE = 0, 1, 2, 3
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _fill(dst, o, cnt, v) -> bool:
+    """A run of `cnt` bytes `v` into dst from `o`; False if it passes the row's end with a
+    non-zero byte (a zero run past the width is padding)."""
+    cap = dst.shape[0]
+    end = o + cnt
+    if end > cap:
+        if v != 0:
+            return False
+        end = cap
+    for k in range(o, end):
+        dst[k] = v
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _literal(src, i, cnt, dst, o) -> int:
+    """Copy src[i:i+cnt] into dst from `o`; the index in src of a non-zero byte past the
+    row's end, or -1."""
+    cap = dst.shape[0]
+    for k in range(cnt):
+        v = src[i + k]
+        if o + k < cap:
+            dst[o + k] = v
+        elif v != 0:
+            return i + k
+    return -1
+
+
 @njit(cache=True, nogil=True)
 def _decode_row(mode, src, dst):
     """Decode one row `src` in compression `mode` (0, 1, 2, 3) into `dst` (one plane row of the
@@ -103,14 +132,8 @@ def _decode_row(mode, src, dst):
         o = 0
         for i in range(0, n, 2):
             cnt = np.int64(src[i]) + 1
-            v = src[i + 1]
-            end = o + cnt
-            if end > cap:
-                if v != 0:
-                    return TOO_LONG, i
-                end = cap
-            for k in range(o, end):
-                dst[k] = v
+            if not _fill(dst, o, cnt, src[i + 1]):
+                return TOO_LONG, i
             o += cnt
         if o < cap:
             dst[o:] = 0
@@ -125,27 +148,18 @@ def _decode_row(mode, src, dst):
                 cnt = c + 1
                 if i + cnt > n:
                     return TRUNCATED, i - 1
-                for k in range(cnt):
-                    v = src[i + k]
-                    if o < cap:
-                        dst[o] = v
-                    elif v != 0:
-                        return TOO_LONG, i + k
-                    o += 1
+                bad = _literal(src, i, cnt, dst, o)
+                if bad >= 0:
+                    return TOO_LONG, bad
+                o += cnt
                 i += cnt
             elif c > 128:                     # the next byte 257 - c times
                 cnt = 257 - c
                 if i >= n:
                     return TRUNCATED, i - 1
-                v = src[i]
+                if not _fill(dst, o, cnt, src[i]):
+                    return TOO_LONG, i - 1
                 i += 1
-                end = o + cnt
-                if end > cap:
-                    if v != 0:
-                        return TOO_LONG, i - 2
-                    end = cap
-                for k in range(o, end):
-                    dst[k] = v
                 o += cnt
             # c == 128: no operation
         if o < cap:
@@ -172,13 +186,10 @@ def _decode_row(mode, src, dst):
         o += off
         if i + cnt > n:
             return TRUNCATED, start
-        for k in range(cnt):
-            v = src[i + k]
-            if o < cap:
-                dst[o] = v
-            elif v != 0:
-                return TOO_LONG, i + k
-            o += 1
+        bad = _literal(src, i, cnt, dst, o)
+        if bad >= 0:
+            return TOO_LONG, bad
+        o += cnt
         i += cnt
     return OK, n
 
