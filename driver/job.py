@@ -172,17 +172,12 @@ class PrintJob:
 
     # -- device steps ---------------------------------------------------------------------
     def _wait(self, done, what: str, timeout: float = 120.0) -> P.Status:
-        try:
-            return self.printer.wait(done, what, timeout)
-        except PrinterFault as exc:
-            raise JobError(str(exc), exc.fault, exc.stroke) from None
+        return self._command(lambda: self.printer.wait(done, what, timeout))
 
     def prepare(self) -> P.Status:
         """The printer brought to readiness (driver/printer.py `ready`)."""
-        try:
-            return self.printer.ready(on_step=lambda words: self._state("connecting", words))
-        except PrinterFault as exc:
-            raise JobError(str(exc), exc.fault, exc.stroke) from None
+        return self._command(lambda: self.printer.ready(
+            on_step=lambda words: self._state("connecting", words)))
 
     def place(self) -> int:
         """x0: encoder count of image column 0 on the measured paper, from the placement's
@@ -256,7 +251,8 @@ class PrintJob:
         return int(self.speed_mm_s / 25.4 * prof.counts_per_inch)
 
     def _command(self, step):
-        """A printer command; refused because a fault is latched, it names that fault."""
+        """A printer API call; a fault it meets (latched, or refusing the command) becomes
+        this job's JobError, in the printer's words."""
         try:
             return step()
         except PrinterFault as exc:
