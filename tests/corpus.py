@@ -456,3 +456,28 @@ if __name__ == "__main__":  # write the corpus somewhere to look at it
     for c in write_corpus(target):
         print(f"{c.name:32s} {c.phrase}")
     print(target)
+
+
+def fuzz_failures(samples: dict, tmp_path: Path, n: int, opener, suffix: str = "") -> list[str]:
+    """Open `n` mutations of every valid sample with `opener` (path -> an image source) and
+    read all its bands: each must decode or raise ImageError naming the file with a
+    problem, within 5 s.  Returns what did neither, one line each."""
+    import time
+
+    from wideprint.rip.load import ImageError
+    bad = []
+    for kind, data in samples.items():
+        for i, m in enumerate(mutations(data, n, seed=zlib.crc32(kind.encode()))):
+            p = tmp_path / f"fuzz_{kind}_{i}{suffix}"
+            p.write_bytes(m)
+            t0 = time.perf_counter()
+            try:
+                src = opener(p)
+                for b in src.bands(16):
+                    assert b.shape[1:] == (src.width, src.channels)
+            except ImageError as e:
+                assert str(p) in str(e) and e.problem
+            except Exception as e:  # noqa: BLE001 - reported by the caller
+                bad.append(f"{kind} #{i}: {type(e).__name__}: {e}")
+            assert time.perf_counter() - t0 < 5
+    return bad
