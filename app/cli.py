@@ -52,12 +52,12 @@ def _save_latched(printer, path: str) -> None:
 
 
 def _close_device(dev, args) -> None:
-    """Emulator outputs are complete once it is closed."""
-    if dev.emulator is not None:
-        dev.emulator.close()
-        if getattr(args, "latched_out", None):
-            _save_latched(dev.emulator, args.latched_out)
-    dev.close()
+    """Emulator outputs are complete once it is closed (app/devices.close_device); then
+    the latched words asked for are saved."""
+    from .devices import close_device
+    close_device(dev)
+    if dev.emulator is not None and getattr(args, "latched_out", None):
+        _save_latched(dev.emulator, args.latched_out)
 
 
 def _settings(args, profile):
