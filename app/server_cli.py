@@ -66,13 +66,17 @@ class Client:
             self._conn = None
 
     def request(self, method: str, path: str, body=None, headers: dict | None = None,
-                raw: bool = False):
+                raw: bool = False, binary: bool = False):
         hdrs = {"Authorization": f"Bearer {self.token}"}
         hdrs.update(headers or {})
         if isinstance(body, (dict, list)):
             body = json.dumps(body).encode()
             hdrs["Content-Type"] = "application/json"
         import http.client
+        if hasattr(body, "read"):
+            # an upload cannot be sent twice: never on a kept-alive connection the server
+            # may have closed meanwhile (a long-lived client such as the GUI)
+            self.close()
         for attempt in (0, 1):
             conn = self._connection()
             try:
@@ -95,6 +99,8 @@ class Client:
                                    f"{self.host}:{self.port}: {exc}") from None
         if resp.getheader("Connection", "").lower() == "close":
             self.close()
+        if binary and resp.status < 400:
+            return data
         if raw and resp.status < 400:
             return data.decode()
         try:
@@ -155,6 +161,34 @@ class Client:
 
     def report(self, job_id: int | None = None) -> list[dict]:
         return self.request("GET", "/v1/report" + (f"?job={job_id}" if job_id else ""))["prints"]
+
+    def edit(self, job_id: int, **change) -> dict:
+        """Change a job not yet started: any of settings (a partial mapping: only the
+        settings given change), copies, priority, printer."""
+        return self.request("PATCH", f"/v1/jobs/{job_id}", body=change)["job"]
+
+    def preview(self, job_id: int, px: int | None = None) -> dict:
+        return self.request("GET", f"/v1/jobs/{job_id}/preview" + (f"?px={px}" if px else ""))
+
+    def preview_png(self, job_id: int, px: int | None = None) -> bytes:
+        return self.request("GET", f"/v1/jobs/{job_id}/preview.png" + (f"?px={px}" if px else ""),
+                            binary=True)
+
+    def printers(self) -> list[dict]:
+        return self.request("GET", "/v1/printers")["printers"]
+
+    def printer_action(self, printer: str, what: str, body: dict | None = None) -> dict:
+        """clear-fault ({"then": ...}), pause, resume, test-print ({"kind": ...})."""
+        return self.request("POST", f"/v1/printers/{printer}/{what}", body=body or {})
+
+    def move(self, job_id: int, printer: str | None) -> dict:
+        return self.request("POST", f"/v1/jobs/{job_id}/move", body={"printer": printer})["job"]
+
+    def estop(self) -> list[str]:
+        return self.request("POST", "/v1/estop", body={})["stopped"]
+
+    def shutdown(self) -> None:
+        self.request("POST", "/v1/shutdown", body={})
 
     def wait(self, job_id: int, timeout: float = 300.0, poll: float = 0.2) -> dict:
         deadline = time.monotonic() + timeout
@@ -231,8 +265,7 @@ def cmd_clear_fault(args) -> int:
     try:
         client = _client(args)
         printer = args.printer or client.status()["printers"][0]["name"]
-        r = client.request("POST", f"/v1/printers/{printer}/clear-fault",
-                           body={"then": "fail" if args.fail else "resume"})
+        r = client.printer_action(printer, "clear-fault", {"then": "fail" if args.fail else "resume"})
     except ApiError as exc:
         return _fail("clear-fault", exc)
     jobs = ", ".join(str(j) for j in r["jobs"]) or "no job was stopped"
@@ -243,8 +276,7 @@ def cmd_clear_fault(args) -> int:
 
 def cmd_move(args) -> int:
     try:
-        job = _client(args).request("POST", f"/v1/jobs/{args.id}/move",
-                                    body={"printer": args.printer})["job"]
+        job = _client(args).move(args.id, args.printer)
     except ApiError as exc:
         return _fail("move", exc)
     print(f"job {job['id']}: printer {job['printer'] or 'any'}")
@@ -253,10 +285,10 @@ def cmd_move(args) -> int:
 
 def cmd_estop(args) -> int:
     try:
-        r = _client(args).request("POST", "/v1/estop", body={})
+        stopped = _client(args).estop()
     except ApiError as exc:
         return _fail("estop", exc)
-    print("emergency stop: " + (", ".join(r["stopped"]) or "nothing was printing") +
+    print("emergency stop: " + (", ".join(stopped) or "nothing was printing") +
           "; every printer paused")
     return EXIT_OK
 

@@ -20,13 +20,13 @@ from . import queue as Q
 from .calibration import CalibrationDialog
 from .config import GuiSettings, default_cache_dir, default_config_dir, ensure_user_profile, SETTINGS_FILE
 from .device_panel import DevicePanel
-from .estimate import fmt_duration, fmt_ml
+from ..estimate import fmt_duration, fmt_ml
 from .jobsettings import JobSettings, cached_profile, printable_width_mm
 from .liveview import LiveView
 from .logview import LogView
 from .messages import plain_message, short_paths
 from .preview import PreviewPanel
-from .render import compute_preview, render_separations
+from ..jobpreview import compute_preview, render_separations
 from .settings_panel import EstimateBox, SettingsPanel
 from .workers import DeviceConfig, Pace, PrinterWorker, Task, Ticket
 
@@ -500,7 +500,7 @@ class MainWindow(QMainWindow):
             it.state = Q.LOADING
             self.model.changed(it.id)
         path, js, prof, mw = it.path, it.settings.copy(), self.profile_path(it.settings), self._media_width(it.settings)
-        task = Task(("preview", it.id, key), lambda: compute_preview(path, js, prof, mw))
+        task = Task(("preview", it.id, key), lambda: compute_preview(path, js.rip_settings(mw), cached_profile(prof), js.copies))
         self._start_task(task, self._preview_done, self._preview_failed)
 
     def _start_task(self, task: Task, done, failed) -> None:

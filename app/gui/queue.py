@@ -14,7 +14,7 @@ from PySide6.QtGui import QBrush, QColor, QDrag, QFontMetrics, QPainter, QPalett
 from PySide6.QtWidgets import (QAbstractItemView, QApplication, QStyle, QStyledItemDelegate,
                                QStyleOptionProgressBar, QTableView)
 
-from .estimate import Estimate, fmt_duration
+from ..estimate import Estimate, fmt_duration
 from .jobsettings import JobSettings
 from .messages import short_paths
 

@@ -10,7 +10,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog
                                QSpinBox, QToolButton, QVBoxLayout, QWidget)
 
 from ...rip.settings import setting
-from .estimate import Estimate, fmt_duration, fmt_ml
+from ..estimate import Estimate, fmt_duration, fmt_ml
 from .jobsettings import SIZE_MODES, JobSettings, cached_profile
 
 

@@ -29,7 +29,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlsplit
 
-from .config import PRIORITY_RANGE, SQLITE_MAX_INT
+from .config import SQLITE_MAX_INT
+from .previews import PREVIEW_PX, THUMB_PX
 from .spool import STATES, SpoolError
 from .validate import Invalid, _check_int, validate_job_request
 
@@ -470,6 +471,13 @@ class ApiHandler(BaseHTTPRequestHandler):
             if method == "GET" and route == ["printers"]:
                 self._query(url.query, ())
                 return self._json(200, {"printers": self.srv.printers()})
+            if method == "POST" and route == ["shutdown"]:
+                self._query(url.query, ())
+                if body:
+                    raise Invalid("shutdown takes no parameters")
+                self._json(200, {"stopping": True})
+                self.srv.request_stop()
+                return
             if method == "POST" and route == ["estop"]:
                 self._query(url.query, ())
                 return self._json(200, {"stopped": self.srv.estop()})
@@ -481,6 +489,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                     if not isinstance(body, dict) or set(body) - {"then"}:
                         raise Invalid('expected {"then": "resume"|"fail"}')
                     return self._json(200, self.srv.clear_fault(name, body.get("then", "resume")))
+                if what == "test-print":
+                    return self._json(200, self.srv.test_print(name, body))
                 if what in ("pause", "resume"):
                     if body:
                         raise Invalid(f"{what} takes no parameters")
@@ -493,18 +503,24 @@ class ApiHandler(BaseHTTPRequestHandler):
                 job_id = parse_number(route[1])
                 if job_id is None:
                     raise Invalid(f"no job {route[1][:40]!r} (job ids are whole numbers)", 404)
-                self._query(url.query, ())
+                self._query(url.query, ("px",) if route[2:] in (["preview"], ["preview.png"]) else ())
                 if method == "GET" and len(route) == 2:
                     job = self.srv.spool.get(job_id)
                     if job is None:
                         raise Invalid(f"no job {job_id}", 404)
                     return self._json(200, {"job": self.srv.public(job)})
                 if method == "PATCH" and len(route) == 2:
-                    if not isinstance(body, dict) or set(body) != {"priority"}:
-                        raise Invalid('expected {"priority": N}')
-                    pr = _check_int("priority", body["priority"], *PRIORITY_RANGE)
-                    job = self.srv.spool.set_priority(job_id, pr)
-                    return self._json(200, {"job": self.srv.public(job)})
+                    return self._json(200, {"job": self.srv.public(self.srv.edit(job_id, body))})
+                if method == "GET" and len(route) == 3 and route[2] in ("preview", "preview.png"):
+                    job = self.srv.spool.get(job_id)
+                    if job is None:
+                        raise Invalid(f"no job {job_id}", 404)
+                    q = self._query(url.query, ("px",))
+                    px = _check_int("px", _number("px", q["px"]), *PREVIEW_PX) if "px" in q \
+                        else THUMB_PX
+                    if route[2] == "preview.png":
+                        return self._send(200, self.srv.previews.png(job, px), "image/png")
+                    return self._json(200, self.srv.previews.info(job, px))
                 if method == "POST" and len(route) == 3 and route[2] == "move":
                     if not isinstance(body, dict) or set(body) != {"printer"} or \
                             not isinstance(body["printer"], (str, type(None))):

@@ -31,15 +31,19 @@ from pathlib import Path
 
 from .accounting import prints_csv
 from .api import ApiHandler, _HTTPServer
-from .config import CHUNK, IMAGE_SUFFIXES, SERVER_FILE, ServerConfig, _fsync_dir, ensure_token
+from .config import (CHUNK, IMAGE_SUFFIXES, MAX_COPIES, PRIORITY_RANGE, SERVER_FILE, ServerConfig,
+                     _fsync_dir, ensure_token)
 from .hotfolders import HotFolders
 from .presets import Presets
+from .previews import Previews
 from .sdnotify import notify
 from .spool import Spool
-from .validate import Invalid
+from .validate import Invalid, _check_int, validate_settings
 from .worker import Worker
 
 log = logging.getLogger("wideprint.server")
+
+EDITABLE = {"priority", "copies", "settings", "printer"}
 
 
 # -- the server ---------------------------------------------------------------------------------
@@ -50,12 +54,14 @@ class PrintServer:
         self.state_dir = Path(config.state_dir)
         self.state_dir.mkdir(parents=True, exist_ok=True)
         os.chmod(self.state_dir, 0o700) if self.state_dir.stat().st_uid == os.geteuid() else None
+        self._lock_state_dir()
         (self.state_dir / "icc").mkdir(exist_ok=True)
         if config.media_dir:
             Path(config.media_dir).mkdir(parents=True, exist_ok=True)
         self.printer_configs = config.printer_configs()
         # each printer its own profile; settings and presets are checked against the first
-        self.profiles = {p.name: load_profile(p.profile_path) for p in self.printer_configs}
+        self.profiles = {p.name: load_profile(p.profile_path or self._own_profile(p.name))
+                         for p in self.printer_configs}
         self.profile = self.profiles[self.printer_configs[0].name]
         self.preset_source = Presets(self.state_dir, self.profile)
         self.token = ensure_token(self.state_dir)
@@ -69,6 +75,7 @@ class PrintServer:
         self.workers = {p.name: Worker(self, p, self.profiles[p.name]) for p in self.printer_configs}
         self.worker = next(iter(self.workers.values()))     # the first printer
         self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
+        self.previews = Previews(self)
         handler = type("Handler", (ApiHandler,), {"srv": self})
         if config.host not in ("127.0.0.1", "localhost", "::1"):
             log.warning("the API listens on %s, beyond this machine: anyone with the token "
@@ -79,6 +86,41 @@ class PrintServer:
         self._http_thread = threading.Thread(target=self.http.serve_forever, name="wideprint-api",
                                              daemon=True)
         self._stopped = threading.Event()
+        self.stop_requested = threading.Event()     # POST /v1/shutdown: serve() stops
+
+    def _lock_state_dir(self) -> None:
+        """One server per state directory: a second one (a GUI starting its own while
+        another starts, a second `serve`) would fight the first over the printers and the
+        queue.  The lock is the kernel's (flock), so it dies with its process, kill -9
+        included."""
+        import fcntl
+        fd = os.open(self.state_dir / "server.lock", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                pid = os.read(fd, 32).decode().strip() or "?"
+            finally:
+                os.close(fd)
+            raise ValueError(f"another wideprint server (pid {pid}) already serves "
+                             f"{self.state_dir}") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
+
+    def _own_profile(self, name: str) -> Path:
+        """A printer configured without a profile gets its own in the state directory
+        (profiles/NAME.toml, first a copy of the built-in one), where calibration writes
+        its results (docs/server.md, "Printer profiles")."""
+        from ...rip.profile import DEFAULT_PROFILE
+        d = self.state_dir / "profiles"
+        d.mkdir(exist_ok=True)
+        path = d / f"{name}.toml"
+        if not path.exists():
+            tmp = path.with_suffix(".tmp")
+            tmp.write_bytes(Path(DEFAULT_PROFILE).read_bytes())
+            os.replace(tmp, path)
+        return path
 
     def _clean_spool(self) -> None:
         """Private copies nobody references (a crash between copy and commit) go."""
@@ -98,6 +140,13 @@ class PrintServer:
                 os.unlink(path)
             except OSError:
                 pass
+
+    def request_stop(self) -> None:
+        """An authorised client asked the server to stop (the GUI that started it, when it
+        closes with nothing to print): as SIGTERM, the job printing pauses at its next
+        stroke boundary and the next start resumes it."""
+        log.info("stop requested through the API")
+        self.stop_requested.set()
 
     def stopping(self) -> bool:
         return self._stopped.is_set()
@@ -154,6 +203,9 @@ class PrintServer:
             (self.state_dir / SERVER_FILE).unlink()
         except OSError:
             pass
+        fd, self._lock_fd = getattr(self, "_lock_fd", None), None
+        if fd is not None:
+            os.close(fd)                    # the lock goes with the descriptor
 
     # -- intake -------------------------------------------------------------------------------
     def queue_file(self, src, name: str, size: int, *, exact: bool = False, check=None,
@@ -255,6 +307,47 @@ class PrintServer:
     def hold(self, job_id: int) -> dict:
         return self.spool.hold(job_id)
 
+    def edit(self, job_id: int, change: dict) -> dict:
+        """PATCH /v1/jobs/ID (docs/server.md, "Editing a job"): only the fields given change.
+        `settings` is a partial settings mapping checked by the one schema and laid over the
+        job's own (placement field by field; null puts a setting back to automatic), so an
+        operator editing one setting of several jobs changes only that setting of each."""
+        from ...rip.settings import merge
+        if not isinstance(change, dict) or not change or set(change) - EDITABLE:
+            raise Invalid(f"expected an object with some of {', '.join(sorted(EDITABLE))}")
+        job = self.spool.get(job_id)
+        if job is None:
+            raise Invalid(f"no job {job_id}", 404)
+        kw = {}
+        if "priority" in change:
+            kw["priority"] = _check_int("priority", change["priority"], *PRIORITY_RANGE)
+        if "copies" in change:
+            kw["copies"] = _check_int("copies", change["copies"], 1, MAX_COPIES)
+        if "settings" in change:
+            profile = self.profiles.get(job["printer"] or "") or self.profile
+            raw = change["settings"]
+            if not isinstance(raw, dict) or not isinstance(raw.get("placement", {}), dict):
+                raise Invalid("settings must be a JSON object (placement a nested one)")
+            # null: the setting goes back to its default (the key is dropped)
+            dropped = {k for k, v in raw.items() if v is None}
+            place = raw.get("placement", {})
+            dropped_place = {k for k, v in place.items() if v is None}
+            part = dict({k: v for k, v in raw.items() if v is not None and k != "placement"},
+                        placement={k: v for k, v in place.items() if v is not None})
+            merged = merge(job["settings"], validate_settings(part, profile, self.state_dir / "icc"))
+            merged = {k: v for k, v in merged.items() if k not in dropped}
+            merged["placement"] = {k: v for k, v in merged.get("placement", {}).items()
+                                   if k not in dropped_place}
+            if not merged["placement"]:
+                del merged["placement"]
+            kw["settings"] = validate_settings(merged, profile, self.state_dir / "icc")
+        job = self.spool.edit(job_id, **kw)
+        if "printer" in change:
+            job = self.move(job_id, change["printer"])
+        self.previews.forget(job_id)
+        self.notify()
+        return job
+
     def release(self, job_id: int) -> dict:
         job = self.spool.release(job_id)
         self.notify()
@@ -292,6 +385,30 @@ class PrintServer:
             return w.clear_fault(then)
         except ValueError as exc:
             raise Invalid(str(exc)) from None
+        except RuntimeError as exc:
+            raise Invalid(str(exc), 409) from None
+
+    def test_print(self, name: str, pattern) -> dict:
+        """POST /v1/printers/NAME/test-print: a test pattern printed on that printer between
+        jobs; answers when it has printed (docs/server.md, "Test prints")."""
+        from ...rip.settings import TEST_PATTERNS
+        w = self.printer_worker(name)
+        if not isinstance(pattern, dict) or set(pattern) - {"kind", "dpi", "width_mm", "head", "nozzle"}:
+            raise Invalid('expected {"kind": PATTERN, "dpi": N, "width_mm": MM, "head": H, "nozzle": N}')
+        if pattern.get("kind") not in TEST_PATTERNS:
+            raise Invalid(f"kind must be one of {', '.join(TEST_PATTERNS)}")
+        dpi = pattern.get("dpi", 150)
+        if dpi not in w.profile.dpi_modes:
+            raise Invalid(f"dpi must be one of {', '.join(map(str, w.profile.dpi_modes))}")
+        width = pattern.get("width_mm", 100.0)
+        if isinstance(width, bool) or not isinstance(width, (int, float)) or not 5 <= width <= 3400:
+            raise Invalid("width_mm must be a number of 5..3400")
+        if "head" in pattern and pattern["head"] not in {h.name for h in w.profile.heads}:
+            raise Invalid(f"no head {pattern['head']!r} in printer {name}'s profile")
+        if "nozzle" in pattern:
+            _check_int("nozzle", pattern["nozzle"], 1, w.profile.nozzles)
+        try:
+            return dict(w.test_print(pattern), printer=name, profile=str(w.profile.path))
         except RuntimeError as exc:
             raise Invalid(str(exc), 409) from None
 
@@ -384,7 +501,8 @@ def serve(config: ServerConfig, ready=None) -> int:
     boundary and resumed by the next start."""
     server = PrintServer(config)
     server.start()
-    done = threading.Event()
+
+    done = server.stop_requested
 
     def on_signal(signum, frame):
         done.set()

@@ -394,6 +394,30 @@ class Spool:
             c.execute("UPDATE jobs SET state='queued' WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
+    def edit(self, job_id: int, *, settings: dict | None = None, copies: int | None = None,
+             priority: int | None = None) -> dict:
+        """Change a job that has not started: its settings (the whole effective mapping),
+        copies, priority (docs/server.md, "Editing a job").  A job stopped part-way keeps
+        the settings its printed strokes were made with."""
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            started = job["interrupted"] or job["checkpoint"] is not None or job["fault"]
+            if job["state"] not in ("queued", "held") or (started and settings is not None):
+                raise SpoolError(f"job {job_id} is {job['state']}"
+                                 + (" part-way" if started and job["state"] != "printing" else "")
+                                 + ": only a job not yet started can be edited")
+            if copies is not None and copies < job["copies_done"]:
+                raise SpoolError(f"job {job_id} has printed {job['copies_done']} copies already")
+            sets, args = [], []
+            for col, v in (("settings", None if settings is None else json.dumps(settings)),
+                           ("copies", copies), ("priority", priority)):
+                if v is not None:
+                    sets.append(f"{col}=?")
+                    args.append(v)
+            if sets:
+                c.execute(f"UPDATE jobs SET {', '.join(sets)} WHERE id=?", (*args, job_id))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
     def set_priority(self, job_id: int, priority: int) -> dict:
         with self.tx() as c:
             job = self._get_for_change(c, job_id)

@@ -21,6 +21,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("wideprint.server")
 
+# printer job ids of test prints: above every spool job id (docs/server.md, "Test prints")
+TEST_PRINT_BASE = 0x8000_0000
+
 
 # -- the worker -------------------------------------------------------------------------------
 class Worker(threading.Thread):
@@ -47,6 +50,9 @@ class Worker(threading.Thread):
         self.job = None                    # the PrintJob now running
         self._cancel: set[int] = set()
         self._backoff = server.config.reconnect_backoff[0]
+        self._tests: list[dict] = []       # test prints asked for, run between jobs
+        self._test_ids = 0
+        self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
 
     # control from other threads
@@ -91,6 +97,85 @@ class Worker(threading.Thread):
                  ", ".join(str(j["id"]) for j in jobs) or "-", "resumed" if then == "resume" else "failed")
         return dict(printer=self.name_, jobs=[j["id"] for j in jobs], then=then, still=cleared)
 
+    @staticmethod
+    def _mtime(path) -> int | None:
+        try:
+            return os.stat(path).st_mtime_ns if path else None
+        except OSError:
+            return None
+
+    def _fresh_profile(self) -> None:
+        """The printer profile re-read when its file changed (the GUI's calibration wrote
+        it): the next job and test print use the new dead nozzles, offsets, ..."""
+        from ...rip.profile import ProfileError, load_profile
+        m = self._mtime(self.profile.path)
+        if m is None or m == self._profile_mtime:
+            return
+        try:
+            prof = load_profile(self.profile.path)
+        except ProfileError as exc:
+            log.error("printer %s: the changed profile is refused, the old one stays: %s",
+                      self.name_, exc)
+            self._profile_mtime = m
+            return
+        self.profile, self._profile_mtime = prof, m
+        self.srv.profiles[self.name_] = prof
+        if self.dev is not None:
+            self.dev.profile = prof
+        log.info("printer %s: profile %s re-read", self.name_, prof.path)
+
+    def test_print(self, pattern: dict, timeout: float = 600.0) -> dict:
+        """A test pattern (rip/testprints.py) printed between jobs, even with the queue
+        paused, never on a printer with a fault: {state, message, media, report}."""
+        if self.fault:
+            raise RuntimeError(f"printer {self.name_} has a fault ({self.fault}): clear it first")
+        req = dict(pattern=dict(pattern), done=threading.Event(), result=None)
+        with self.wake:
+            self._tests.append(req)
+            self.wake.notify_all()
+        if not req["done"].wait(timeout):
+            raise RuntimeError(f"printer {self.name_}: the test print did not end within {timeout:.0f} s")
+        return req["result"]
+
+    def _run_test(self, req: dict) -> None:
+        from ...driver.job import JobCancelled, JobError, PrintJob
+        from ...driver.link import LinkError
+        from ...rip.testprints import PatternJob
+        p = req["pattern"]
+        result = dict(state="failed", message="", media=None, report=None)
+        try:
+            self._fresh_profile()
+            prof = self.profile
+            dpi = int(p.get("dpi", 150))
+            k = prof.k(dpi)
+            width = int(round(float(p.get("width_mm", 100.0)) / 25.4 * prof.counts_per_inch / k))
+            rip = PatternJob.for_pattern(p["kind"], prof, width, dpi,
+                                         **{x: p[x] for x in ("head", "nozzle") if x in p})
+            self._test_ids += 1
+            job_id = TEST_PRINT_BASE + self._test_ids
+            self.current = dict(id=None, name=f"test print: {p['kind']}", copy=1, copies=1,
+                                state="printing", detail="", stroke_index=None,
+                                strokes_total=0, strokes_printed=0, resumed=False)
+            self.printer_state = "printing"
+            pj = PrintJob(self._device(), rip, job_id=job_id)
+            self.job = pj
+            rep = pj.run()
+            media = self.srv.config.media_dir
+            path = media / f"testprint-{self._test_ids}.tif" if media else None
+            result.update(state="done", report=rep.as_dict(),
+                          media=str(path) if path is not None and path.exists() else None)
+        except (JobCancelled, JobError, LinkError, ValueError, OSError, KeyError) as exc:
+            result["message"] = str(exc) or type(exc).__name__
+        except Exception as exc:  # noqa: BLE001 - the worker must go on
+            log.exception("test print")
+            result["message"] = f"internal error: {exc}"
+        finally:
+            self.job, self.current = None, None
+            if self.printer_state == "printing":
+                self.printer_state = "idle"
+            req["result"] = result
+            req["done"].set()
+
     def cancel(self, job_id: int) -> bool:
         cur = self.current
         if cur is None or cur["id"] != job_id:
@@ -127,6 +212,9 @@ class Worker(threading.Thread):
                     self.srv.expire_spool()
                 except Exception:  # noqa: BLE001 - housekeeping must not end the worker
                     log.exception("expiring spool copies")
+            if self._tests and not self.fault:
+                self._run_test(self._tests.pop(0))
+                continue
             job = None
             if not self.paused:
                 try:
@@ -154,7 +242,9 @@ class Worker(threading.Thread):
         if self.dev is None:
             from ..devices import open_device
             media = self.srv.config.media_dir
-            media_path = (lambda job: str(media / f"job-{job}.tif")) if media else None
+            media_path = (lambda job: str(media / (f"job-{job}.tif" if job < TEST_PRINT_BASE else
+                                                   f"testprint-{job - TEST_PRINT_BASE}.tif"))
+                          ) if media else None
             self.dev = open_device(self.printer.device, self.profile, media_path=media_path)
         return self.dev
 
@@ -183,6 +273,7 @@ class Worker(threading.Thread):
         from ...driver.link import DeviceError, LinkError
         from ...driver.stream import StreamError
 
+        self._fresh_profile()
         job = self.spool.claim(job_id, self.name_)
         if job is None:
             return

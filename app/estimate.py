@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ...rip.profile import Profile
+from ..rip.profile import Profile
 
 
 @dataclass

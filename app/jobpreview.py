@@ -1,4 +1,5 @@
-"""Preview pictures, computed off the UI thread (no Qt here).
+"""Job previews and estimates (no Qt here): the print server makes them for its clients
+(GET /v1/jobs/ID/preview, docs/server.md), the GUI shows them.
 
 The preview is the RIP's real halftone of a downsampled image: the file is reduced with
 libvips (the loader's own pipeline, so alpha, CMYK JPEG inversion and band layout are
@@ -17,13 +18,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...rip.color import Separator
-from ...rip.halftone import Halftoner
-from ...rip.load import ImageSource, open_image
-from ...rip.pipeline import RipJob, profile_curves
-from ...rip.planes import render_rgb
+from ..rip.color import Separator
+from ..rip.halftone import Halftoner
+from ..rip.load import ImageSource, open_image
+from ..rip.pipeline import RipJob, profile_curves
+from ..rip.planes import render_rgb
 from .estimate import Estimate, estimate
-from .jobsettings import JobSettings, cached_profile
 
 PREVIEW_MAX_PX = 1600
 
@@ -127,14 +127,12 @@ def preview_size(width_mm: float, height_mm: float, width_dots: int, height_rows
     return pw, ph
 
 
-def compute_preview(path: str, js: JobSettings, profile_path: str,
-                    media_width_mm: float | None = None, max_px: int = PREVIEW_MAX_PX,
+def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVIEW_MAX_PX,
                     cancelled=lambda: False) -> PreviewData:
-    """Open, place, separate and halftone a reduced copy of the image; estimate the job.
-    Raises ImageError / ValueError (shown in the queue row)."""
+    """Open, place, separate and halftone a reduced copy of the image (RipSettings `rs`,
+    Profile `profile`); estimate the job.  Raises ImageError / ValueError (the job's own
+    problem, shown in its row)."""
     t0 = time.monotonic()
-    profile = cached_profile(profile_path)
-    rs = js.rip_settings(media_width_mm)
     job = RipJob(path, rs, profile)
     try:
         W, H = job.width, job.height
@@ -144,31 +142,35 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
         width_mm = W * k / profile.counts_per_inch * 25.4
         height_mm = H * profile.row_um / 1000.0
         pw, ph = preview_size(width_mm, height_mm, W, H, max_px)
-        quarter = js.rotate in (90, 270)
-        rotate = int(js.rotate)
-        mirror = bool(js.mirror)
-        src = open_image(path)
-        try:
-            tw, th = (ph, pw) if quarter else (pw, ph)
-            if cancelled():
-                raise InterruptedError
-            small = reduce_image(src, tw, th)
-            small = place_array(small, rotate, mirror)
-            sep = Separator(src.colorspace, src.depth, embedded_icc=src.icc,
-                            input_icc=rs.input_icc, output_icc=rs.output_icc, intent=rs.intent,
-                            ink_limit=job.ink_limit, curves=profile_curves(profile))
-            if cancelled():
-                raise InterruptedError
-            ink = sep.convert(small)
-            dots = Halftoner(rs.dither, pw, channels=4).process(np.ascontiguousarray(ink))
-            desc = (f"{src.width} × {src.height} px {src.colorspace.upper() if src.colorspace != 'grey' else 'grey'} "
-                    f"{src.depth}-bit {(src.format or '').upper()}").strip()
-            warnings = list(getattr(sep, "warnings", []))
-            resampled = (tw, th) != (src.width, src.height)
-        finally:
-            src.close()
+        rotate = int(rs.placement.rotate)
+        mirror = bool(rs.placement.mirror)
+        quarter = rotate in (90, 270)
+        from ..rip.inputs import sniff_input
+        if sniff_input(path) != "image":
+            dots, desc, warnings, resampled = _document_preview(job, pw, ph, cancelled)
+        else:
+            src = open_image(path)
+            try:
+                tw, th = (ph, pw) if quarter else (pw, ph)
+                if cancelled():
+                    raise InterruptedError
+                small = reduce_image(src, tw, th)
+                small = place_array(small, rotate, mirror)
+                sep = Separator(src.colorspace, src.depth, embedded_icc=src.icc,
+                                input_icc=rs.input_icc, output_icc=rs.output_icc, intent=rs.intent,
+                                ink_limit=job.ink_limit, curves=profile_curves(profile))
+                if cancelled():
+                    raise InterruptedError
+                ink = sep.convert(small)
+                dots = Halftoner(rs.dither, pw, channels=4).process(np.ascontiguousarray(ink))
+                desc = (f"{src.width} × {src.height} px {src.colorspace.upper() if src.colorspace != 'grey' else 'grey'} "
+                        f"{src.depth}-bit {(src.format or '').upper()}").strip()
+                warnings = list(getattr(sep, "warnings", []))
+                resampled = (tw, th) != (src.width, src.height)
+            finally:
+                src.close()
         drops = dots.reshape(-1, 4).sum(axis=0, dtype=np.int64)
-        est = estimate(profile, W, H, rs.dpi, rs.passes, rs.bidir, total, js.copies,
+        est = estimate(profile, W, H, rs.dpi, rs.passes, rs.bidir, total, copies,
                        preview_drops=drops, preview_dots=pw * ph)
         # no resampling: the halftoner saw exactly the placed image the RIP will see
         exact = (pw, ph) == (W, H) and not resampled
@@ -178,6 +180,31 @@ def compute_preview(path: str, js: JobSettings, profile_path: str,
                            seconds=time.monotonic() - t0, warnings=warnings)
     finally:
         job.close()
+
+
+DOCUMENT_PREVIEW_MAX_DOTS = 40_000_000
+
+
+def _document_preview(job, pw: int, ph: int, cancelled):
+    """PDF, PostScript, EPS and RTL: the job's own source, already on the device grid,
+    reduced band by band (Ghostscript renders it, or the RTL decoder runs, once); above
+    DOCUMENT_PREVIEW_MAX_DOTS the picture is left blank rather than render a banner for a
+    thumbnail (the estimate's size and time stand, its ink is then unknown)."""
+    W, H = job.width, job.height
+    src = job.source
+    desc = f"{(getattr(src, 'format', '') or 'document').upper()} on the device grid"
+    if W * H > DOCUMENT_PREVIEW_MAX_DOTS:
+        return np.zeros((ph, pw, 4), np.uint8), desc + " (too large to preview)", [], True
+    if cancelled():
+        raise InterruptedError
+    if getattr(src, "prescreened", False):
+        small = _band_reduce(src, pw, ph)
+        return (small > 0).astype(np.uint8), desc, [], (pw, ph) != (W, H)
+    small = _band_reduce(src, pw, ph)
+    sep = job._separator()
+    ink = sep.convert(small)
+    dots = Halftoner(job.settings.dither, pw, channels=4).process(np.ascontiguousarray(ink))
+    return dots, desc, list(getattr(sep, "warnings", [])), (pw, ph) != (W, H)
 
 
 def render_separations(dots: np.ndarray, enabled) -> np.ndarray:
