@@ -483,10 +483,11 @@ def cmd_emulator(args) -> int:
 def cmd_gui(args) -> int:
     from .gui import main as gui_main      # it says so if PySide6 is missing
     argv = list(args.files)
-    if args.device:
-        argv += ["--device", args.device]
-    if args.config_dir:
-        argv += ["--config-dir", args.config_dir]
+    for opt in ("state_dir", "device", "config_dir"):
+        if getattr(args, opt):
+            argv += ["--" + opt.replace("_", "-"), getattr(args, opt)]
+    if args.verbose_gui:
+        argv.append("--verbose")
     return gui_main(argv)
 
 
@@ -588,10 +589,17 @@ def build_parser() -> argparse.ArgumentParser:
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
 
-    p = sub.add_parser("gui", help="the operator GUI (PySide6)")
-    p.add_argument("files", nargs="*", metavar="FILE", help="files to put in the queue")
-    p.add_argument("--device", help="device spec (default: the saved setting, 'emulator')")
-    p.add_argument("--config-dir", metavar="DIR", help="settings and user profile folder")
+    p = sub.add_parser("gui", help="the operator GUI (PySide6), a client of this machine's print "
+                                   "server (started in the background when none runs)")
+    p.add_argument("files", nargs="*", metavar="FILE", help="files to send to the server's queue")
+    p.add_argument("--state-dir", metavar="DIR",
+                   help="the print server's state directory (default: $WIDEPRINT_STATE_DIR, "
+                        "else the user's)")
+    p.add_argument("--device", help="the printer of a server the GUI starts (default: the saved "
+                                    "setting, 'emulator')")
+    p.add_argument("--config-dir", metavar="DIR", help="the GUI's own settings folder")
+    p.add_argument("-v", "--verbose", dest="verbose_gui", action="store_true",
+                   help="debug messages in the log")
     p.set_defaults(func=cmd_gui)
 
     from .server_cli import add_parser as add_server_parsers

@@ -33,9 +33,15 @@ def is_emulator_spec(spec: str) -> bool:
     return spec.strip() in EMULATOR_SPECS
 
 
+def parse_inject(items: list[str] | None):
+    """`--inject KIND=VALUE` items as the emulator's Faults (ValueError naming the bad one)."""
+    from ..device_sim.faults import Faults
+    return Faults.parse(items)
+
+
 def open_device(spec: str, profile: "Profile", faults=None, media_path=None, event_log=None,
                 machine_profile: "Profile | None" = None, *,
-                printer_class=None, wrap: Callable | None = None,
+                printer_class=None, wrap: Callable | None = None, inject: list[str] | None = None,
                 **emulator_options) -> Device:
     """Open the device a spec names.
 
@@ -49,6 +55,8 @@ def open_device(spec: str, profile: "Profile", faults=None, media_path=None, eve
     from ..driver.link import CommandLink, LinkError
     from ..driver.transport import TcpData, UsbData
     spec = spec.strip()
+    if inject and faults is None:
+        faults = parse_inject(inject)
     if spec in EMULATOR_SPECS:
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer

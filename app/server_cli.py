@@ -320,6 +320,17 @@ def cmd_serve(args) -> int:
     except ValueError as exc:
         print(f"wideprint serve: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if args.inject:
+        from .devices import is_emulator_spec, parse_inject
+        try:
+            parse_inject(args.inject)                    # checked before anything starts
+        except ValueError as exc:
+            print(f"wideprint serve: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        if not any(is_emulator_spec(p.device) for p in cfg.printer_configs()):
+            print("wideprint serve: --inject needs an emulated printer", file=sys.stderr)
+            return EXIT_USAGE
+        cfg.inject = list(args.inject)
     if args.max_file_size is not None:
         cfg.max_file_bytes = args.max_file_size
     if args.keep_failed is not None:
@@ -593,6 +604,9 @@ def add_parser(sub) -> None:
                         "default: one printer, 'main', on --device")
     p.add_argument("--printer-profile", action="append", metavar="NAME=TOML",
                    help="that printer's profile (default: --profile)")
+    p.add_argument("--inject", action="append", metavar="KIND=VALUE",
+                   help="an emulator fault for every emulated printer (tests, demos, training; "
+                        "kinds as for `wideprint print --inject`)")
     p.add_argument("--verbose-server", action="store_true", help="debug logging")
     p.set_defaults(func=cmd_serve)
 

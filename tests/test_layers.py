@@ -75,7 +75,7 @@ def test_the_import_parser_sees_relative_and_lazy_imports():
     assert "driver.protocol" in own("wideprint.device_sim.dsp")        # from ..driver import
     assert "driver.link" in own("wideprint.driver.job")                # from .link import ...
     assert "device_sim.printer" in own("wideprint.app.devices")        # inside a function
-    assert "driver.protocol" in own("wideprint.app.gui.workers")       # three dots
+    assert "rip.testprints" in own("wideprint.app.gui.calibration")    # three dots
 
 
 @pytest.mark.parametrize("name", NEUTRAL)

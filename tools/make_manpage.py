@@ -19,7 +19,10 @@ def manpage() -> str:
                 description="RIP, driver and print server for the 3.4 m CMYK solvent plotter "
                             "(8 x Xaar XJ128), with its emulator",
                 url="docs/ in the source tree", authors=["the wideprint authors"])
-    return str(Manpage(build_parser(), _data=data))
+    page = str(Manpage(build_parser(), _data=data))
+    # argparse-manpage leaves help text that wraps onto a line starting with ' (troff's
+    # other control character) unescaped: \& makes such a line text
+    return "\n".join("\\&" + ln if ln.startswith("'") else ln for ln in page.split("\n"))
 
 
 def main() -> int:

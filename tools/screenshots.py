@@ -1,15 +1,15 @@
-"""Screenshots of the operator GUI for docs/gui.md, taken on a real X display.
+"""Screenshots of the operator GUI for README and docs/gui.md, taken on a real X display.
 
     .venv/bin/python tools/screenshots.py [--out docs/screenshots] [--offscreen]
 
-Starts Xvfb (unless --offscreen, or a DISPLAY is set and --use-display is given), runs
-the real MainWindow with QT_QPA_PLATFORM=xcb on the in-process emulator, and saves:
+Starts Xvfb (unless --offscreen, or a DISPLAY is set and --use-display is given), a print
+server process with two emulated printers in a temporary state directory, and the real
+MainWindow (QT_QPA_PLATFORM=xcb) as its client; then: a job printed (history), a damaged
+file failed, a long banner printing on one printer, three jobs waiting, two of them
+selected (the settings form shows their mixed values).  Saves, at the two screen sizes the
+GUI is checked at:
 
-    empty.png        the window as it opens
-    queue.png        a queue of images, the selected one previewed with its estimate
-    printing.png     a job printing, the live media view partly filled
-    calibration.png  the bidirectional alignment print on a misaligned machine, suggested block
-    error.png        a damaged file: its row, the preview's message and the device panel
+    gui-1366x768.png     gui-1920x1080.png     calibration.png
 
 Settings go to a temporary config dir, so the operator's own settings are not touched.
 """
@@ -126,101 +126,94 @@ def main(argv=None) -> int:
 
 
 def run(out: Path) -> int:
+    import subprocess as sp
     from PySide6.QtWidgets import QApplication
     app = QApplication.instance() or QApplication(["wideprint-screenshots"])
-    print(f"Qt platform: {app.platformName()}, display {os.environ.get('DISPLAY', '-')}")
-    from wideprint.app.gui import queue as Q
     from wideprint.app.gui.main_window import MainWindow
-
+    from wideprint.app.gui.server_link import ServerLink, find_or_start
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix="wideprint-shots-"))
-    files = make_images(tmp / "jobs")
+    files = make_images(tmp / "files")
+    state = tmp / "state"
+    server = sp.Popen([sys.executable, "-m", "wideprint.app.cli", "serve", "--state-dir", str(state),
+                       "--media-dir", str(tmp / "media"), "--port", "0", "--paused",
+                       "--printer", "left=emulator", "--printer", "right=emulator"],
+                      stdout=sp.DEVNULL, stderr=sp.DEVNULL)
 
-    def spin(cond, timeout=60.0, what=""):
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < timeout:
-            app.processEvents()
-            if cond():
-                return True
-            time.sleep(0.02)
-        print(f"  timed out waiting for {what}")
-        return False
-
-    def settle(seconds=0.4):
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < seconds:
+    def spin(cond, timeout=120.0, what=""):
+        t = time.monotonic() + timeout
+        while not cond():
             app.processEvents()
             time.sleep(0.02)
+            if time.monotonic() > t:
+                raise SystemExit(f"tools/screenshots.py: timed out waiting for {what}")
 
-    def shot(widget, name):
-        settle()
-        path = out / f"{name}.png"
-        widget.grab().save(str(path))
-        print(f"  {path}")
+    def settle(seconds=0.5):
+        t = time.monotonic() + seconds
+        while time.monotonic() < t:
+            app.processEvents()
+            time.sleep(0.02)
 
-    win = MainWindow(config_dir=tmp / "config")
-    win.ask_before_closing = False
-    win.resize(1600, 1000)
-    win.show()
-    win.device.media_dir.setText(str(tmp / "media"))
-    win.device.configChanged.emit()
-    settle(1.0)
-    shot(win, "empty")
-
-    # -- a queue with previews ------------------------------------------------------------------
-    items = win.add_files([str(files[k]) for k in ("banner", "chart", "photo", "bmp", "poster")])
-    banner = items[0]
-    spin(lambda: all(i.state != Q.LOADING for i in items), 120, "previews")
-    win.select_item(banner.id)
-    spin(lambda: win.preview.has_image, 30, "the banner's preview")
-    win.preview.fit_image()
-    shot(win, "queue")
-
-    # -- printing, live view part filled ----------------------------------------------------------
-    sp = win.settings_panel
-    win.select_item(banner.id)
-    sp.passes.setCurrentIndex(sp.passes.findData(4))
-    sp.direction.setCurrentIndex(sp.direction.findData(True))
-    settle(0.5)
-    win.device.speed.setCurrentIndex(win.device.speed.findData(0.0))
-    win.connect_device()                      # home and measure the paper at full speed
-    spin(lambda: win.connected, 60, "connection")
-    win.device.set_speed(5.0)                 # then print at 5 x real time
-    win.print_queue()                         # the banner first, the others wait
-    spin(lambda: banner.progress >= 0.45, 300, "half the banner")
-    shot(win, "printing")
-    win.cancel_job()
-    spin(lambda: win.current is None, 30, "the cancel")
-    win.device.set_speed(0.0)
-
-    # -- calibration --------------------------------------------------------------------------
-    win.device.faults.setText("bidir-error=2")
-    win.device.configChanged.emit()
-    dlg = win.open_calibration()
-    dlg.pattern.setCurrentIndex(dlg.pattern.findData("bidir-align"))
-    dlg.dpi.setCurrentIndex(dlg.dpi.findData(150))
-    dlg.resize(900, 660)
-    dlg.print_pattern()
-    spin(lambda: dlg.media is not None, 120, "the alignment print")
-    shot(dlg, "calibration")
-    dlg.close()
-    settle(0.3)
-    win.device.faults.setText("")
-    win.device.configChanged.emit()
-
-    # -- an error: a damaged file; the queue prints the rest ---------------------------------------
-    win.select_item(banner.id)
-    win.remove_selected()                     # the operator drops the cancelled banner
-    (bad,) = win.add_files([str(files["damaged"])])
-    spin(lambda: bad.state != Q.LOADING, 30, "the damaged file")
-    win.print_queue()
-    spin(lambda: win.current is None and not win.running, 300, "the queue")
-    win.select_item(bad.id)
-    win.tabs.setCurrentWidget(win.preview)
-    shot(win, "error")
-
-    win.close()
-    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        from wideprint.app.server_cli import ApiError, Client
+        t = time.monotonic() + 60
+        while True:                          # our server up, before the GUI looks for one
+            try:
+                Client(state).status()
+                break
+            except ApiError:
+                if time.monotonic() > t or server.poll() is not None:
+                    raise SystemExit("tools/screenshots.py: the print server did not start")
+                time.sleep(0.2)
+        client, _ = find_or_start(state)
+        win = MainWindow(ServerLink(state, client), config_dir=tmp / "cfg")
+        win.ask_before_closing = False
+        win.resize(1366, 768)
+        win.show()
+        spin(lambda: len(win.printers) == 2, what="the printers")
+        c = win.link.client()
+        # history: a photo printed, a damaged file failed
+        done = c.submit(files["photo"], settings={"dpi": 150})["job"]["id"]
+        bad = c.submit(files["damaged"])["job"]["id"]
+        c.pause_queue(False)
+        spin(lambda: {j["id"]: j["state"] for j in c.jobs()}.get(done) == "done"
+             and {j["id"]: j["state"] for j in c.jobs()}.get(bad) == "failed", what="the history")
+        c.printer_action("right", "pause")
+        # a banner printing on the left, jobs waiting
+        banner = c.submit(files["banner"], printer="left",
+                          settings={"passes": 4, "bidir": True})["job"]["id"]
+        waiting = [c.submit(files[k], copies=n, settings=s)["job"]["id"] for k, n, s in (
+            ("chart", 2, {"dpi": 300, "passes": 2}), ("poster", 1, {"dpi": 600, "passes": 4}),
+            ("bmp", 3, {"dpi": 150}))]
+        spin(lambda: any(j["id"] == banner and j["strokes_done"] >= 1 for j in c.jobs()),
+             what="the banner printing")
+        c.pause_queue(True)
+        spin(lambda: len(win.queue_model.jobs) == 4, what="the queue in the GUI")
+        spin(lambda: all(j in win.queue_model.thumbs for j in waiting), what="thumbnails")
+        win.queue_view.select_ids(waiting[:2])
+        win._show_selection()
+        spin(lambda: win.estimate.all["time"].text() != "–", what="the estimate")
+        for w, h in ((1366, 768), (1920, 1080)):
+            win.resize(w, h)
+            settle(1.0)
+            win.grab().save(str(out / f"gui-{w}x{h}.png"))
+            print(out / f"gui-{w}x{h}.png")
+        c.action(banner, "cancel")
+        spin(lambda: not any(p.get("current") for p in win.printers), what="the printers idle")
+        dlg = win.open_calibration("right")
+        dlg.pattern.setCurrentIndex(dlg.pattern.findData("bidir-align"))
+        dlg.print_pattern()
+        spin(lambda: dlg.media is not None, what="the test print")
+        settle(0.5)
+        dlg.grab().save(str(out / "calibration.png"))
+        print(out / "calibration.png")
+        dlg.close()
+        win.link.stop()
+        win.close()
+    finally:
+        server.terminate()
+        server.wait(20)
+        shutil.rmtree(tmp, ignore_errors=True)
     return 0
 
 

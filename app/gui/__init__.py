@@ -1,6 +1,6 @@
 """`wideprint gui`: the operator GUI (PySide6).  docs/gui.md describes it.
 
-    main(argv) -> exit code;  argv: [FILE ...] [--config-dir DIR] [--device SPEC]
+    main(argv) -> exit code;  argv: [FILE ...] [--state-dir DIR] [--device SPEC] [--config-dir DIR]
 """
 
 from __future__ import annotations
@@ -11,11 +11,20 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="wideprint gui", description="The wideprint operator GUI.")
-    ap.add_argument("files", nargs="*", metavar="FILE", help="images (or folders) to put in the queue")
+    ap = argparse.ArgumentParser(
+        prog="wideprint gui",
+        description="The wideprint operator GUI: a client of the print server of this machine "
+                    "(started in the background when none runs); FILEs go to its queue.")
+    ap.add_argument("files", nargs="*", metavar="FILE", help="files (or folders) to send to the queue")
+    ap.add_argument("--state-dir", metavar="DIR",
+                    help="the print server's state directory (default: $WIDEPRINT_STATE_DIR, "
+                         "else the user's state dir)")
+    ap.add_argument("--device", metavar="SPEC",
+                    help="the printer of a server the GUI starts (default: the last one used, "
+                         "first 'emulator'); a running server keeps its own")
     ap.add_argument("--config-dir", metavar="DIR",
-                    help="settings and the user printer profile (default: the platform's user config dir)")
-    ap.add_argument("--device", metavar="SPEC", help="device spec ('emulator' or serial=PORT,data=tcp://HOST:PORT)")
+                    help="the GUI's own settings (default: $WIDEPRINT_CONFIG_DIR, else the user's "
+                         "config dir)")
     ap.add_argument("-v", "--verbose", action="store_true", help="debug messages in the log")
     return ap
 
@@ -30,21 +39,36 @@ def main(argv: list[str] | None = None) -> int:
               "desktop, under xvfb-run, or with QT_QPA_PLATFORM=offscreen", file=sys.stderr)
         return 2
     try:
-        from PySide6.QtWidgets import QApplication
+        from PySide6.QtWidgets import QApplication, QMessageBox
     except ImportError as exc:  # pragma: no cover - depends on the installation
         print(f"wideprint gui: PySide6 is not installed ({exc}); pip install 'wideprint[gui]'",
               file=sys.stderr)
         return 2
+    from pathlib import Path
+
+    from ..server.config import default_state_dir
+    from .config import GuiSettings, SETTINGS_FILE, default_config_dir
     from .main_window import MainWindow
+    from .server_link import ServerLink, find_or_start
 
     logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose else logging.INFO)
     app = QApplication.instance() or QApplication(["wideprint"])
     app.setApplicationName("wideprint")
     app.setOrganizationName("wideprint")
-    win = MainWindow(config_dir=args.config_dir)
+    config_dir = Path(args.config_dir) if args.config_dir else default_config_dir()
+    gs = GuiSettings.load(config_dir / SETTINGS_FILE)
     if args.device:
-        win.device.spec.setText(args.device)
-        win._device_config_changed()
+        gs.device_spec = args.device
+        gs.save(config_dir / SETTINGS_FILE)
+    state_dir = Path(args.state_dir) if args.state_dir else default_state_dir()
+    try:
+        client, proc = find_or_start(state_dir, gs.device_spec, media_dir=state_dir / "media")
+    except RuntimeError as exc:
+        print(f"wideprint gui: {exc}", file=sys.stderr)
+        QMessageBox.critical(None, "wideprint", str(exc))
+        return 1
+    link = ServerLink(state_dir, client)
+    win = MainWindow(link, config_dir=config_dir, started_server=proc)
     if args.files:
         win.add_files(args.files)
     win.show()

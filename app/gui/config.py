@@ -1,18 +1,19 @@
-"""Where the GUI keeps its state, and the remembered settings (docs/gui.md).
+"""Where the GUI keeps its own state, and the remembered settings (docs/gui.md).
 
-- settings: ``<config dir>/gui.json`` (window layout, job defaults, device, emulator options)
-- the user's printer profile: ``<config dir>/printers/user.toml``, a copy of the built-in
-  default made on first use; calibration writes into it (rip.profile.save_calibration)
-- the config dir is platformdirs' user config dir for "wideprint"
-  (``~/.config/wideprint`` on Linux), or ``$WIDEPRINT_CONFIG_DIR`` when set (tests)
+The queue, the history, the printers and their profiles are the print server's (its state
+directory); the GUI keeps only what is the operator's: ``<config dir>/gui.json`` (the
+settings for new jobs, the window layout, the last folder, the test print choices), saved
+at each change, so a GUI that is killed loses nothing of it.  The config dir is
+platformdirs' user config dir for "wideprint" (``~/.config/wideprint`` on Linux), or
+``$WIDEPRINT_CONFIG_DIR`` when set (tests).
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import os
-import shutil
 import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -21,7 +22,6 @@ log = logging.getLogger("wideprint.gui")
 
 APP = "wideprint"
 SETTINGS_FILE = "gui.json"
-USER_PROFILE = Path("printers") / "user.toml"
 
 
 def default_config_dir() -> Path:
@@ -32,41 +32,30 @@ def default_config_dir() -> Path:
     return Path(platformdirs.user_config_dir(APP))
 
 
-def default_cache_dir() -> Path:
-    env = os.environ.get("WIDEPRINT_CONFIG_DIR")
-    if env:
-        return Path(env) / "cache"
-    import platformdirs
-    return Path(platformdirs.user_cache_dir(APP))
+@functools.lru_cache(maxsize=16)
+def _load_profile_cached(path: str, mtime: int):
+    from ...rip.profile import load_profile
+    return load_profile(path)
 
 
-def builtin_profile_path() -> Path:
-    from ...rip.profile import DEFAULT_PROFILE
-    return DEFAULT_PROFILE
-
-
-def ensure_user_profile(config_dir: Path) -> Path:
-    """The user's copy of the printer profile; copied from the built-in default on first use."""
-    path = Path(config_dir) / USER_PROFILE
-    if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(builtin_profile_path(), path)
-        log.info("created the user printer profile %s (a copy of the built-in default)", path)
-    return path
+def cached_profile(path: str | os.PathLike):
+    """load_profile, cached per file modification time (calibration rewrites the file)."""
+    p = str(path)
+    try:
+        mtime = os.stat(p).st_mtime_ns
+    except OSError:
+        mtime = -1
+    return _load_profile_cached(p, mtime)
 
 
 @dataclass
 class GuiSettings:
-    """Everything remembered between runs (JSON, unknown keys ignored)."""
-    job: dict = field(default_factory=dict)          # JobSettings defaults for new jobs
-    device_spec: str = "emulator"
-    media_dir: str = ""                              # emulator: write each job's media here
-    emulator_speed: float = 10.0                     # 0 = as fast as possible, 1 = real time
-    emulator_faults: str = ""                        # e.g. "bidir-error=2 dead-nozzle=M1:57"
+    """Everything the GUI remembers (JSON, unknown keys ignored)."""
+    job: dict = field(default_factory=dict)          # settings for new jobs (the schema's mapping)
+    copies: int = 1                                  # copies of new jobs
+    device_spec: str = "emulator"                    # the device of a server the GUI starts
     last_dir: str = ""
-    separations: list = field(default_factory=lambda: [True, True, True, True])
     geometry: str = ""                               # base64 QMainWindow geometry
-    window_state: str = ""                           # base64 QMainWindow state (docks)
     splitter: str = ""
     calibration: dict = field(default_factory=dict)  # last pattern, dpi, width
 
@@ -83,9 +72,10 @@ class GuiSettings:
         if not isinstance(raw, dict):
             return s
         for k, v in raw.items():
-            if k in s.__dataclass_fields__ and isinstance(v, type(getattr(s, k))) or (
-                    k == "emulator_speed" and isinstance(v, (int, float))):
+            if k in s.__dataclass_fields__ and isinstance(v, type(getattr(s, k))):
                 setattr(s, k, v)
+        s.job = _checked_job(s.job)
+        s.copies = max(1, min(100, s.copies))
         return s
 
     def save(self, path: Path) -> None:
@@ -95,6 +85,8 @@ class GuiSettings:
         try:
             with os.fdopen(fd, "w") as f:
                 json.dump(asdict(self), f, indent=2)
+                f.flush()
+                os.fsync(f.fileno())
             os.replace(tmp, path)
         except OSError:
             try:
@@ -102,3 +94,14 @@ class GuiSettings:
             except OSError:
                 pass
             raise
+
+
+def _checked_job(mapping: dict) -> dict:
+    """Settings for new jobs as the schema accepts them (a hand-edited file that does not
+    pass keeps the GUI startable: the settings go back to the defaults)."""
+    from ...rip.settings import SettingsError, validate
+    try:
+        return validate(mapping)
+    except SettingsError as exc:
+        log.warning("the GUI's settings for new jobs are refused (%s); using the defaults", exc)
+        return {}

@@ -426,7 +426,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 self._query(url.query, ())
                 return self._json(200, self.srv.status())
             if method == "GET" and route == ["jobs"]:
-                q = self._query(url.query, ("state", "limit", "after"))
+                q = self._query(url.query, ("state", "limit", "after", "newest"))
                 states = None
                 if "state" in q:
                     states = tuple(s for s in q["state"].split(",") if s)
@@ -436,7 +436,11 @@ class ApiHandler(BaseHTTPRequestHandler):
                                       f"not {q['state'][:60]!r}")
                 limit = _number("limit", q["limit"]) if "limit" in q else 0
                 after = _number("after", q["after"]) if "after" in q else 0
-                return self._json(200, {"jobs": self.srv.jobs(states, limit or None, after)})
+                newest = q.get("newest", "0")
+                if newest not in ("0", "1"):
+                    raise Invalid("newest must be 0 or 1")
+                return self._json(200, {"jobs": self.srv.jobs(states, limit or None, after,
+                                                               newest == "1")})
             if method == "GET" and route == ["presets"]:
                 self._query(url.query, ())
                 presets = self.srv.presets

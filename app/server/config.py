@@ -107,6 +107,7 @@ class ServerConfig:
     scan_interval: float = 1.0
     start_paused: bool = False
     profile_path: str | None = None
+    inject: list = field(default_factory=list)   # emulator faults (--inject KIND=VALUE)
     reconnect_backoff: tuple = (0.5, 30.0)
     keep_failed_s: float = 7 * 86400       # spool copies of failed/cancelled jobs (requeue)
     settle_s: float = DEFAULT_SETTLE_S     # hot folders: unchanged this long (and no writer)

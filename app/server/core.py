@@ -275,9 +275,9 @@ class PrintServer:
             d["position"] = positions.get(job["id"])
         return d
 
-    def jobs(self, states=None, limit=None, after=0) -> list[dict]:
+    def jobs(self, states=None, limit=None, after=0, newest=False) -> list[dict]:
         pos = self.spool.queue_position()
-        return [self.public(j, pos) for j in self.spool.jobs(states, limit, after)]
+        return [self.public(j, pos) for j in self.spool.jobs(states, limit, after, newest)]
 
     def cancel(self, job_id: int) -> dict:
         before = self.spool.get(job_id)

@@ -231,12 +231,13 @@ class Spool:
         return _job_dict(row) if row else None
 
     def jobs(self, states: tuple[str, ...] | None = None, limit: int | None = None,
-             after: int = 0) -> list[dict]:
+             after: int = 0, newest: bool = False) -> list[dict]:
+        """Jobs in id order; newest: the last `limit` of them, newest first (the history)."""
         q, args = "SELECT * FROM jobs WHERE id > ?", [after]
         if states:
             q += f" AND state IN ({','.join('?' * len(states))})"
             args += list(states)
-        q += " ORDER BY id"
+        q += " ORDER BY id DESC" if newest else " ORDER BY id"
         if limit:
             q += " LIMIT ?"
             args.append(limit)

@@ -245,7 +245,10 @@ class Worker(threading.Thread):
             media_path = (lambda job: str(media / (f"job-{job}.tif" if job < TEST_PRINT_BASE else
                                                    f"testprint-{job - TEST_PRINT_BASE}.tif"))
                           ) if media else None
-            self.dev = open_device(self.printer.device, self.profile, media_path=media_path)
+            from ..devices import is_emulator_spec
+            inject = self.srv.config.inject if is_emulator_spec(self.printer.device) else None
+            self.dev = open_device(self.printer.device, self.profile, inject=inject,
+                                   media_path=media_path)
         return self.dev
 
     def _drop_device(self) -> None:

@@ -1,0 +1,188 @@
+"""The server's printers side by side (docs/gui.md, "Printers"): one card per printer with
+its state, the job it prints, its live telemetry (carriage, FIFO levels, head temperatures)
+and its fault in plain words, and the operator's buttons: pause / resume, clear the fault
+(the stopped job resumes at its first unfinished stroke, or fails), test prints.
+
+Every text has a place of fixed height, so a fault appearing moves nothing."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (QFrame, QGridLayout, QHBoxLayout, QLabel, QMenu, QProgressBar,
+                               QPushButton, QScrollArea, QSizePolicy, QToolButton, QVBoxLayout,
+                               QWidget)
+
+from .messages import plain_message, short_paths
+
+
+def _fixed_lines(label: QLabel, lines: int) -> QLabel:
+    label.setWordWrap(True)
+    label.setAlignment(Qt.AlignTop | Qt.AlignLeft)
+    label.setFixedHeight(lines * label.fontMetrics().lineSpacing() + 4)
+    label.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Fixed)
+    return label
+
+
+class PrinterCard(QFrame):
+    action = Signal(str, str, object)      # printer, what (pause, resume, clear-fault, test-prints), body
+
+    def __init__(self, name: str, parent=None):
+        super().__init__(parent)
+        self.name = name
+        self.setObjectName(f"printer_{name}")
+        self.setFrameShape(QFrame.StyledPanel)
+        self.setMinimumWidth(300)
+        g = QGridLayout(self)
+        g.setContentsMargins(8, 4, 8, 4)
+        g.setVerticalSpacing(1)
+        self.title = QLabel(f"<b>{name}</b>")
+        self.title.setTextFormat(Qt.RichText)
+        self.device = self.title                       # its device spec: in the tooltip
+        self.state = _fixed_lines(QLabel("—"), 1)
+        self.state.setObjectName("printer_state")
+        g.addWidget(self.title, 0, 0)
+        g.addWidget(self.state, 0, 1, 1, 2)
+        self.job = _fixed_lines(QLabel(""), 1)
+        self.job.setObjectName("printer_job")
+        g.addWidget(self.job, 1, 0, 1, 2)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.progress.setTextVisible(True)
+        self.progress.setFormat("")
+        self.progress.setFixedWidth(110)
+        self.progress.setFixedHeight(self.job.height())
+        g.addWidget(self.progress, 1, 2)
+        self.telemetry = _fixed_lines(QLabel(""), 1)
+        self.telemetry.setObjectName("printer_telemetry")
+        self.telemetry.setStyleSheet("color: #333;")
+        g.addWidget(self.telemetry, 2, 0, 1, 3)
+        self.fault = _fixed_lines(QLabel(""), 2)
+        self.fault.setObjectName("printer_fault")
+        self.fault.setStyleSheet("color: #c62828;")
+        g.addWidget(self.fault, 3, 0, 1, 3)
+        row = QHBoxLayout()
+        self.pause = QPushButton("Pause")
+        self.pause.setObjectName("printer_pause")
+        self.pause.clicked.connect(self._pause_clicked)
+        self.clear = QToolButton()
+        self.clear.setObjectName("printer_clear")
+        self.clear.setText("Clear fault")
+        self.clear.setPopupMode(QToolButton.InstantPopup)
+        m = QMenu(self.clear)
+        self.act_resume = m.addAction("Clear and resume the stopped job",
+                                      lambda: self.action.emit(self.name, "clear-fault", {"then": "resume"}))
+        self.act_fail = m.addAction("Clear and fail the stopped job",
+                                    lambda: self.action.emit(self.name, "clear-fault", {"then": "fail"}))
+        self.clear.setMenu(m)
+        self.tests = QPushButton("Test prints…")
+        self.tests.setObjectName("printer_tests")
+        self.tests.clicked.connect(lambda: self.action.emit(self.name, "test-prints", None))
+        row.addWidget(self.pause)
+        row.addWidget(self.clear)
+        row.addWidget(self.tests)
+        row.addStretch(1)
+        g.addLayout(row, 4, 0, 1, 3)
+        g.setColumnStretch(1, 1)
+        self.info: dict = {}
+
+    def _pause_clicked(self) -> None:
+        self.action.emit(self.name, "resume" if self.info.get("paused") else "pause", None)
+
+    def show_info(self, p: dict) -> None:
+        self.info = p
+        self.title.setText(f"<b>{self.name}</b> <span style='color:#666'>{p.get('device', '')}</span>")
+        self.title.setToolTip(f"device {p.get('device')}\nprofile {p.get('profile')}")
+        fault = p.get("fault") or ""
+        st = p.get("state", "idle")
+        cur = p.get("current")
+        if fault:
+            text = "<span style='color:#c62828'><b>Fault</b></span> — queue stopped"
+        elif st == "offline":
+            text = f"<span style='color:#b26a00'><b>Offline</b></span> — {short_paths(p.get('error') or '')}"
+        elif cur:
+            text = "<span style='color:#1565c0'><b>Printing</b></span>"
+            if p.get("paused"):
+                text += " — pausing after this job"
+        elif p.get("paused"):
+            text = f"<b>Paused</b> — {p.get('reason') or 'by the operator'}"
+        else:
+            text = "<span style='color:#2e7d32'><b>Ready</b></span> — waiting for jobs"
+        self.state.setText(text)
+        self.state.setToolTip(p.get("reason") or "")
+        if cur:
+            job = f"job {cur['id']}: " if cur.get("id") is not None else ""
+            copies = f", copy {cur['copy']}/{cur['copies']}" if cur.get("copies", 1) > 1 else ""
+            total = cur.get("strokes_total") or 0
+            done = cur.get("strokes_printed") or 0
+            self.job.setText(f"{job}{cur.get('name', '')}{copies} — {cur.get('state', '')}"
+                             + (f", stroke {done}/{total}" if total else ""))
+            self.job.setToolTip(self.job.text())
+            self.progress.setValue(int(1000 * done / total) if total else 0)
+            self.progress.setFormat(f"{100 * done / total:.0f} %" if total else "")
+            t = cur.get("telemetry") or {}
+            parts = []
+            if t:
+                parts.append(f"carriage {t.get('carriage_counts', 0):,}")
+                fifo = t.get("fifo_words") or []
+                temps = t.get("head_temps_c") or []
+                if fifo:
+                    parts.append(f"FIFO {min(fifo)}–{max(fifo)} words")
+                if temps:
+                    parts.append(f"heads {min(temps):.0f}–{max(temps):.0f} °C")
+            self.telemetry.setText("; ".join(parts))
+            self.telemetry.setToolTip(
+                "carriage position (encoder counts); words in each head's FIFO: "
+                + " ".join(str(w) for w in t.get("fifo_words") or []) + "; head temperatures: "
+                + " ".join(f"{c:.1f}" for c in t.get("head_temps_c") or []))
+        else:
+            self.job.setText("")
+            self.progress.setValue(0)
+            self.progress.setFormat("")
+            self.telemetry.setText("")
+        if fault:
+            advice = plain_message(fault)
+            self.fault.setText(short_paths(fault) + (f" {advice}" if advice else ""))
+            self.fault.setToolTip(fault)
+        else:
+            self.fault.setText("")
+            self.fault.setToolTip("")
+        self.pause.setText("Resume" if p.get("paused") else "Pause")
+        self.pause.setEnabled(not fault)
+        self.clear.setEnabled(bool(fault))
+        self.tests.setEnabled(not fault and not cur)
+
+
+class PrintersPanel(QScrollArea):
+    """The printer cards, side by side (scrolling when there are more than fit)."""
+    action = Signal(str, str, object)
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self.setObjectName("printers_panel")
+        self.setWidgetResizable(True)
+        self.setFrameShape(QFrame.NoFrame)
+        self.inner = QWidget()
+        self.row = QHBoxLayout(self.inner)
+        self.row.setContentsMargins(2, 2, 2, 2)
+        self.setWidget(self.inner)
+        self.cards: dict[str, PrinterCard] = {}
+        self.setVerticalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+
+    def show_printers(self, printers: list[dict]) -> None:
+        names = [p["name"] for p in printers]
+        for name in list(self.cards):
+            if name not in names:
+                self.cards.pop(name).deleteLater()
+        for i, p in enumerate(printers):
+            card = self.cards.get(p["name"])
+            if card is None:
+                card = PrinterCard(p["name"])
+                card.action.connect(self.action)
+                self.cards[p["name"]] = card
+                self.row.insertWidget(i, card, 1)
+            card.show_info(p)
+        h = max((c.sizeHint().height() for c in self.cards.values()), default=0)
+        self.setFixedHeight(h + 8)
+
+
+__all__ = ["PrinterCard", "PrintersPanel"]
