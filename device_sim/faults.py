@@ -132,12 +132,17 @@ class Faults:
                         f.feed_error_fraction = float(value.strip()[:-1]) / 100
                     else:
                         f.feed_error = Length.parse(value)
+                        if f.feed_error.unit == "col":
+                            raise ValueError(value)
                 elif attr == "misdirect":
                     head, nozzle, off = value.split(":", 2)
                     xy = _xy(off) if "=" in off else (Length(0.0), Length.parse(off))
                     f.misdirect.append((head.strip(), int(nozzle), *xy))
                 elif attr in ("dot_diameter", "scan_blur"):
-                    setattr(f, attr, Length.parse(value))
+                    length = Length.parse(value)
+                    if length.unit not in ("um", "mm") or length.value < 0:
+                        raise ValueError(value)
+                    setattr(f, attr, length)
                 elif attr == "scan_offset":
                     x, y = value.lower().replace("mm", "").split(",")
                     f.scan_offset = (float(x), float(y))

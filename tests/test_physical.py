@@ -313,7 +313,7 @@ def test_injection_values_parse_with_their_units():
     assert f.scan_offset == (2.0, -1.5) and f.scan_rotation == 1.5
     assert Faults.parse(["bidir-error=2"]).bidir_error == Length(2, "col")
     for bad in ("misdirect=M1:57", "head-offset=C2:z=3um", "bidir-error=fast", "scan-mode=sepia",
-                "feed-error-fraction=1"):
+                "feed-error-fraction=1", "feed-error=2col", "dot-diameter=1row", "scan-blur=-3um"):
         with pytest.raises(ValueError, match="--inject"):
             Faults.parse([bad])
     with pytest.raises(ValueError, match="no head named"):
