@@ -31,6 +31,22 @@ def _emulator_outputs(p: argparse.ArgumentParser) -> None:
                    help="emulator: the 128-bit words every head latched, per stroke")
 
 
+def _scan_options(p: argparse.ArgumentParser, several: bool) -> None:
+    p.add_argument("--scan-out", metavar="SCAN.tif",
+                   help="emulator only: a scan of the print from the physical drop model "
+                   "(docs/physical.md)" + ("; with several files: -N suffix or {job}" if several else ""))
+    p.add_argument("--scan-dpi", type=int, default=1200, metavar="N",
+                   help="resolution of --scan-out (default 1200; 600 or 1200 as a flatbed scans)")
+
+
+SCAN_DPI = (50, 9600)
+
+
+def _check_scan(args) -> None:
+    if args.scan_out and not SCAN_DPI[0] <= args.scan_dpi <= SCAN_DPI[1]:
+        raise ValueError(f"--scan-dpi {args.scan_dpi}: must be {SCAN_DPI[0]}..{SCAN_DPI[1]}")
+
+
 def _emulator_options(args) -> dict:
     opts = {}
     if getattr(args, "vcd", None):
@@ -247,16 +263,18 @@ def cmd_print(args) -> int:
         faults = Faults.parse(args.inject)
         settings = _settings(args, profile)
         _check_icc(settings)
+        _check_scan(args)
         _check_output_folders(report=args.report, media_out=args.media_out,
                               preview=args.preview, log_json=args.log_json,
-                              event_log=args.event_log)
+                              event_log=args.event_log, scan_out=args.scan_out)
     except (ValueError, OSError) as exc:
         return refuse(EXIT_USAGE, str(exc))
     if args.inject and args.device != "emulator":
         return refuse(EXIT_USAGE, "--inject needs --device emulator")
     only_emulator = [o for o, v in (("--media-out", args.media_out), ("--preview", args.preview),
                                     ("--event-log", args.event_log), ("--vcd", args.vcd),
-                                    ("--latched-out", args.latched_out)) if v]
+                                    ("--latched-out", args.latched_out),
+                                    ("--scan-out", args.scan_out)) if v]
     if only_emulator and not emulator:
         # a standalone emulator writes its media in its own process (`wideprint emulator
         # --media-out`); a real printer has none
@@ -265,11 +283,14 @@ def cmd_print(args) -> int:
                       f"(--device emulator); with --device {args.device} the media is written "
                       f"by the device: `wideprint emulator --media-out MEDIA_{{job}}.tif`")
     media: dict[int, str | None] = {}
+    scans: dict[int, str | None] = {}
     scratch = tempfile.TemporaryDirectory(prefix="wideprint-") \
         if args.preview and not args.media_out else None
     try:
+        scan = dict(scan_path=lambda job: scans.get(job), scan_dpi=args.scan_dpi) \
+            if args.scan_out else {}
         dev = open_device(args.device, profile, faults, media_path=lambda job: media.get(job),
-                          event_log=args.event_log, **_emulator_options(args))
+                          event_log=args.event_log, **_emulator_options(args), **scan)
     except (LinkError, ValueError, OSError) as exc:
         if scratch:
             scratch.cleanup()
@@ -316,6 +337,7 @@ def cmd_print(args) -> int:
             if media_file is None and scratch is not None:    # --preview alone: drawn from this
                 media_file = os.path.join(scratch.name, f"media-{i + 1}.tif")
             media[job_id] = media_file
+            scans[job_id] = _media_path(args.scan_out, i, len(files))
             if f in unlisted:
                 failed += 1
                 reports.append(job_failed(f, unlisted[f], dict(job_id=job_id)))
@@ -347,13 +369,16 @@ def cmd_print(args) -> int:
                 rep["job_id"] = job_id
                 progress(1, 1, f"{label} done", final=True)
                 rep["media"] = media_file if args.media_out else None
+                if args.scan_out:
+                    rep["scan"] = scans[job_id]
                 if dev.emulator is not None:
                     stats = dev.emulator.jobs_done.get(job_id, {})
                     rep["stray_drops"] = stats.get("stray")
                 print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
-                      + (f" -> {shown(rep['media'])}" if rep["media"] else ""), file=say)
+                      + (f" -> {shown(rep['media'])}" if rep["media"] else "")
+                      + (f", scan {shown(rep['scan'])}" if rep.get("scan") else ""), file=say)
                 if args.preview:
                     from ..rip.planes import write_preview
                     preview = _media_path(args.preview, i, len(files))
@@ -407,11 +432,16 @@ def cmd_print(args) -> int:
 
 def cmd_test_print(args) -> int:
     from ..device_sim.faults import Faults
-    from .devices import open_device
+    from .devices import is_emulator_spec, open_device
     from ..driver.job import JobError, PrintJob
     from ..driver.link import LinkError
     from ..rip.testprints import PatternJob
+    if args.scan_out and not is_emulator_spec(args.device):
+        print(f"wideprint test-print: --scan-out needs the in-process emulator (--device emulator): "
+              f"a scan of a real print comes from a scanner", file=sys.stderr)
+        return EXIT_USAGE
     try:
+        _check_scan(args)
         profile = _profile(args)
         faults = Faults.parse(args.inject)
         k = profile.k(args.dpi)
@@ -424,8 +454,9 @@ def cmd_test_print(args) -> int:
     if args.planes_out:
         job.write_planes(args.planes_out)
     try:
+        scan = dict(scan_path=args.scan_out, scan_dpi=args.scan_dpi) if args.scan_out else {}
         dev = open_device(args.device, profile, faults, media_path=args.media_out,
-                          event_log=args.event_log, **_emulator_options(args))
+                          event_log=args.event_log, **_emulator_options(args), **scan)
     except (LinkError, ValueError, OSError) as exc:
         print(f"wideprint test-print: {exc}", file=sys.stderr)
         return EXIT_DEVICE
@@ -435,7 +466,8 @@ def cmd_test_print(args) -> int:
             from ..rip.planes import write_preview
             write_preview(args.media_out, args.preview)
         print(f"{args.pattern}: printed {rep.strokes_printed} strokes, {job.width} x {job.height} dots"
-              + (f" -> {args.media_out}" if args.media_out else ""))
+              + (f" -> {args.media_out}" if args.media_out else "")
+              + (f", scan {args.scan_out}" if args.scan_out else ""))
         return EXIT_OK
     except JobError as exc:
         print(f"{args.pattern}: FAILED: {exc}", file=sys.stderr)
@@ -580,6 +612,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--log-json", metavar="JSONL",
                    help="structured job log: states, strokes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
+    _scan_options(p, several=True)
     _rip_options(p)
     p.set_defaults(func=cmd_print)
 
@@ -647,6 +680,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--event-log", metavar="JSONL")
     p.add_argument("--profile", metavar="TOML")
     _emulator_outputs(p)
+    _scan_options(p, several=False)
     p.set_defaults(func=cmd_test_print)
 
     p = sub.add_parser("emulator", help="run the printer emulator on a pty and TCP")

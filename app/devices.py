@@ -48,7 +48,7 @@ def open_device(spec: str, profile: "Profile", faults=None, media_path=None, eve
     For the in-process emulator: it is built from `machine_profile` (the machine as it
     really is; default: the job's profile), `faults`, `media_path` (a path, or a function
     of the job id), `event_log` and `emulator_options` (vcd_path, vcd_window,
-    record_latched); `printer_class` replaces device_sim's Printer (the GUI's live view)
+    record_latched, scan_path and scan_dpi: docs/physical.md); `printer_class` replaces device_sim's Printer (the GUI's live view)
     and `wrap(port, data, printer) -> (port, data)` wraps its endpoints (the GUI paces
     them to the machine's real speed).  The emulator is attached as `device.emulator`."""
     from ..driver.device import Device, Timing, open_link_device, parse_link_spec
@@ -71,6 +71,8 @@ def open_device(spec: str, profile: "Profile", faults=None, media_path=None, eve
             data = UsbData(backend=EmulatorUsbBackend(data))
         link = CommandLink(port, profile.link.response_timeout_s)
         return Device(link, data, profile, emulator=printer, timing=Timing.synchronous())
+    if emulator_options.get("scan_path"):
+        raise ValueError(f"a scan needs the in-process emulator (--device emulator), not {spec}")
     parts = parse_link_spec(spec)
     data = None
     if parts["data"].startswith("usb-emu://"):

@@ -21,10 +21,55 @@ KINDS = {
     "fifo-words": "FIFO depth per head (words) instead of the profile's",
     "encoder-glitch-at": "an impossible A/B transition at this encoder count",
     "starve-guard": "0: a starved FIFO is the seed's underrun fault; 1: pause and resume the line",
-    "bidir-error": "reverse-stroke drops land this many columns off (misaligned machine)",
+    "bidir-error": "reverse-stroke drops land this far early: columns, or 0.3col, 25um",
     "head-error": "HEAD:COUNTS: this head sits COUNTS encoder counts off its profile position",
-    "seed": "random seed for the injected faults",
+    "head-offset": "HEAD:x=20um,y=-10um: this head sits this far off its profile position",
+    "feed-error": "the paper travels this much further per feed (15um), or by a fraction (0.1%)",
+    "misdirect": "HEAD:NOZZLE:8um (along the feed) or HEAD:NOZZLE:x=5um,y=-3um (repeatable)",
+    "dot-diameter": "diameter of a dot on the paper in the scan (e.g. 120um)",
+    "scan-rotation": "scan: the sheet lies rotated by this many degrees on the glass",
+    "scan-scale": "scan: the scanner's true resolution is this factor finer (e.g. 1.002)",
+    "scan-offset": "scan: X,Y in mm: the sheet lies this far right/down on the glass",
+    "scan-noise": "scan: sensor noise, sigma in 8-bit levels (default 1.5)",
+    "scan-blur": "scan: optics blur, Gaussian sigma (default 10um)",
+    "scan-mode": "scan: rgb (default) or grey",
+    "seed": "random seed for the injected faults and the scanner's noise",
 }
+
+UNITS = ("um", "mm", "col", "row")
+
+
+@dataclass(frozen=True)
+class Length:
+    """A length with its unit (docs/physical.md): um, mm, col (columns of the job's dpi
+    mode) or row (rows of the job's row pitch)."""
+    value: float
+    unit: str = "um"
+
+    @classmethod
+    def parse(cls, text: str, default_unit: str = "um") -> "Length":
+        t = text.strip().lower().replace("µm", "um")
+        for unit in UNITS:
+            if t.endswith(unit):
+                return cls(float(t[:-len(unit)]), unit)
+        return cls(float(t), default_unit)
+
+    def um(self, col_um: float, row_um: float) -> float:
+        return self.value * {"um": 1.0, "mm": 1000.0, "col": col_um, "row": row_um}[self.unit]
+
+
+def _xy(text: str) -> tuple[Length, Length]:
+    """'x=20um,y=-10um' (either part optional) -> (dx, dy)."""
+    dx = dy = Length(0.0)
+    for part in text.split(","):
+        key, _, val = part.partition("=")
+        if key.strip() == "x" and val:
+            dx = Length.parse(val)
+        elif key.strip() == "y" and val:
+            dy = Length.parse(val)
+        else:
+            raise ValueError(part)
+    return dx, dy
 
 
 @dataclass
@@ -43,8 +88,19 @@ class Faults:
     fifo_words: int | None = None
     encoder_glitch_at: int | None = None
     starve_guard: int | None = None
-    bidir_error: int = 0
+    bidir_error: float | Length = 0                      # a number: columns
     head_error: list = field(default_factory=list)       # [(head name, counts)]
+    head_offset: list = field(default_factory=list)      # [(head name, Length x, Length y)]
+    feed_error: Length | None = None                     # extra travel per feed
+    feed_error_fraction: float = 0.0                     # of each feed's travel
+    misdirect: list = field(default_factory=list)        # [(head name, nozzle, Length x, Length y)]
+    dot_diameter: Length | None = None
+    scan_rotation: float = 0.0                           # degrees
+    scan_scale: float = 1.0
+    scan_offset: tuple = (0.0, 0.0)                      # mm
+    scan_noise: float = 1.5                              # 8-bit levels
+    scan_blur: Length = Length(10.0)
+    scan_mode: str = "rgb"
     seed: int = 1
 
     @classmethod
@@ -56,7 +112,7 @@ class Faults:
                 raise ValueError(f"--inject {item!r}: expected KIND=VALUE; kinds: {', '.join(KINDS)}")
             kind, value = item.split("=", 1)
             attr = kind.strip().replace("-", "_")
-            if attr not in names:
+            if attr not in names or kind.strip() not in KINDS:
                 raise ValueError(f"--inject {kind!r}: unknown fault; kinds: {', '.join(KINDS)}")
             try:
                 if attr in ("dead_nozzle", "overtemp", "head_error"):
@@ -66,8 +122,36 @@ class Faults:
                     if value not in ("ideal", "typical", "loaded"):
                         raise ValueError(value)
                     f.host_jitter = value
+                elif attr == "bidir_error":
+                    f.bidir_error = Length.parse(value, "col")
+                elif attr == "head_offset":
+                    head, xy = value.split(":", 1)
+                    f.head_offset.append((head.strip(), *_xy(xy)))
+                elif attr == "feed_error":
+                    if value.strip().endswith("%"):
+                        f.feed_error_fraction = float(value.strip()[:-1]) / 100
+                    else:
+                        f.feed_error = Length.parse(value)
+                        if f.feed_error.unit == "col":
+                            raise ValueError(value)
+                elif attr == "misdirect":
+                    head, nozzle, off = value.split(":", 2)
+                    xy = _xy(off) if "=" in off else (Length(0.0), Length.parse(off))
+                    f.misdirect.append((head.strip(), int(nozzle), *xy))
+                elif attr in ("dot_diameter", "scan_blur"):
+                    length = Length.parse(value)
+                    if length.unit not in ("um", "mm") or length.value < 0:
+                        raise ValueError(value)
+                    setattr(f, attr, length)
+                elif attr == "scan_offset":
+                    x, y = value.lower().replace("mm", "").split(",")
+                    f.scan_offset = (float(x), float(y))
+                elif attr == "scan_mode":
+                    if value not in ("rgb", "grey", "gray"):
+                        raise ValueError(value)
+                    f.scan_mode = "grey" if value == "gray" else value
                 elif attr in ("data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
-                              "seed", "starve_guard", "bidir_error"):
+                              "seed", "starve_guard"):
                     setattr(f, attr, int(float(value)))
                 else:
                     setattr(f, attr, float(value))

@@ -202,7 +202,10 @@ class LineRun:
             words = words[:, :count]
             if count == 0:
                 return
-        self._pending.append((first, block.head_mask, words))
+        # the carriage's speed at each fire, for the physical model's drops (docs/physical.md)
+        vel = None if self.printer.scanner is None else \
+            self.move.speeds_at(self.t_fire[first:first + count] - self.t_seg)
+        self._pending.append((first, block.head_mask, words, vel))
         self._pending_fires += count
         if self._pending_fires >= self.LAND_BATCH:
             self.land_pending()
@@ -213,16 +216,17 @@ class LineRun:
             return
         pr = self.printer
         by_mask: dict[int, list] = {}
-        for first, mask, words in self._pending:
-            by_mask.setdefault(mask, []).append((first, words))
+        for first, mask, words, vel in self._pending:
+            by_mask.setdefault(mask, []).append((first, words, vel))
         self._pending, self._pending_fires = [], 0
         for mask, items in by_mask.items():
-            idx = np.concatenate([np.arange(f, f + w.shape[1]) for f, w in items])
-            words = np.concatenate([w for _, w in items], axis=1)
+            idx = np.concatenate([np.arange(f, f + w.shape[1]) for f, w, _ in items])
+            words = np.concatenate([w for _, w, _ in items], axis=1)
+            vel = None if items[0][2] is None else np.concatenate([v for _, _, v in items])
             cols = self.columns[idx]
             heads = [h for h in range(pr.n_heads) if mask >> h & 1]
             for part, h in enumerate(heads):
-                pr.land_drops(h, cols, words[part], self.forward)
+                pr.land_drops(h, cols, words[part], self.forward, vel, self.speed)
             if pr.record_latched and len(heads) == pr.n_heads:
                 pr.latched.setdefault(self.stroke, []).append((int(idx[0]), words))
             if pr.vcd is not None:

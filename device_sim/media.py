@@ -15,13 +15,12 @@ from ..rip.planes import PlanesWriter
 
 
 @njit(cache=True, nogil=True)
-def _land_words(win, base, height, width, words, cols, nozzle_rows, channel):
+def _land_words(win, base, height, width, words, cols, nozzle_rows, nozzle_dcols, channel):
     """Scatter the drops of packed fire words: bit z of fire f lands at
-    (nozzle_rows[z], cols[f]).  Returns (landed, stray, late)."""
+    (nozzle_rows[z], cols[f] + nozzle_dcols[z]).  Returns (landed, stray, late)."""
     landed = stray = late = 0
     nwin = win.shape[0]
     for f in range(words.shape[0]):
-        c = cols[f]
         for w in range(8):
             v = words[f, w]
             if v == 0:
@@ -29,6 +28,7 @@ def _land_words(win, base, height, width, words, cols, nozzle_rows, channel):
             for b in range(16):
                 if v & (1 << b):
                     r = nozzle_rows[w * 16 + b]
+                    c = cols[f] + nozzle_dcols[w * 16 + b]
                     if r < 0 or r >= height or c < 0 or c >= width:
                         stray += 1
                     elif r < base:
@@ -54,9 +54,10 @@ class Media:
         self.closed = False
 
     def land_words(self, channel: int, words: np.ndarray, cols: np.ndarray,
-                   nozzle_rows: np.ndarray) -> None:
-        """Drops of one head: words (fires, 8) uint16, the media column of each fire, and
-        the media row of each of the 128 nozzles (docs/protocol.md 4.3 bit order)."""
+                   nozzle_rows: np.ndarray, nozzle_dcols: np.ndarray | None = None) -> None:
+        """Drops of one head: words (fires, 8) uint16, the media column of each fire, the
+        media row of each of the 128 nozzles (docs/protocol.md 4.3 bit order) and each
+        nozzle's column offset from its fire's column (misdirection; default none)."""
         if words.size == 0:
             return
         top = int(nozzle_rows.max())
@@ -64,7 +65,10 @@ class Media:
             self.flush_below(top - self._win.shape[0] + 1)
         landed, stray, late = _land_words(self._win, self._base, self.height, self.width,
                                           np.ascontiguousarray(words), cols.astype(np.int64),
-                                          nozzle_rows.astype(np.int64), channel)
+                                          nozzle_rows.astype(np.int64),
+                                          np.zeros(nozzle_rows.size, np.int64)
+                                          if nozzle_dcols is None else nozzle_dcols.astype(np.int64),
+                                          channel)
         self.drops[channel] += landed
         self.stray += stray
         self.late += late

@@ -27,6 +27,7 @@ from .head import Head
 from .line import LineRun
 from .media import Media
 from .motion import Trapezoid, ramp_counts
+from .physical import JobGeometry, PhysicalModel, dot_diameter_um
 from .servo import ServoMove, ServoParams
 from .stepper import feed_move
 
@@ -41,7 +42,9 @@ class Printer:
                  media_path: str | Callable[[int], str] | None = None,
                  event_log: str | Path | None = None, vcd_path: str | None = None,
                  vcd_window: tuple[int, int, int, int] = (0, 0, 0, 8),
-                 record_latched: bool = False):
+                 record_latched: bool = False,
+                 scan_path: str | Callable[[int], str | None] | None = None,
+                 scan_dpi: float = 1200):
         self.profile = profile or load_profile()
         self.faults = faults or Faults()
         prof = self.profile
@@ -54,6 +57,15 @@ class Printer:
                            overtemp_c=prof.head.overtemp_c) for h in prof.heads]
         for name, nozzle in self.faults.dead_nozzle:
             self.heads[self.head_index(name)].dead.add(nozzle)
+        # where drops really land, and the scan of each job (docs/physical.md)
+        self.physical = PhysicalModel(prof, self.faults)
+        self.geometry: JobGeometry | None = None
+        self.scan_path, self.scan_dpi = scan_path, scan_dpi
+        self.scanner = None
+        self.scans: dict = {}                # scan path -> its closed Scanner
+        self.paper_extra_nm = 0.0            # the paper's travel beyond its steps (feed-error)
+        self._extra0 = 0.0                   # ... at the open job's JOB_BEGIN
+        self._y_slack_nm = 0.0               # drops of the open job land this far above slot 0
         self.dsp = Dsp(self)
         self.servo = ServoParams.from_profile(self.profile)
         self.rng = random.Random(self.faults.seed)
@@ -127,6 +139,7 @@ class Printer:
     def close(self) -> None:
         if self.media:
             self.media.close()
+        self._close_scan()
         if self.vcd is not None and self.vcd_path:
             self.vcd.write(self.vcd_path)
             self.vcd = None
@@ -346,6 +359,9 @@ class Printer:
             self.feed_state = run.end_state
             self.time += run.duration
         self.paper_steps += made
+        row_um = self.job["row_nm"] / 1000 if self.job else self.profile.row_um
+        self.paper_extra_nm += 1000 * self.physical.feed_error_um(
+            made * self.profile.feed_um_per_step, row_um)
         if self.paper_left_steps is not None:
             self.paper_left_steps -= made
         self.feed_done = True
@@ -464,11 +480,24 @@ class Printer:
         # number, same fire count) must not look like this job's (docs/protocol.md JOB_BEGIN)
         self.line_done = False
         self.fpga.clear_stroke()
+        self._close_scan()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
                         y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
+        self._extra0 = self.paper_extra_nm
         path = self.media_path(job) if callable(self.media_path) else self.media_path
+        geo = self.geometry = self.physical.job_geometry(x0, self.job["k"], y0, row_nm, width, height)
+        # drops pushed up the paper (negative y offsets) land on rows this much above slot 0
+        self._y_slack_nm = 1000 * max(0.0, -min(float(geo.static_dy_um(h).min())
+                                                for h in range(self.n_heads)))
         self.media = Media(width, height, dpi, 25.4e6 / row_nm,
-                           window_rows=self.profile.swath_rows + 256, path=path)
+                           window_rows=self.profile.swath_rows + 256
+                           + int(self._y_slack_nm // row_nm), path=path)
+        scan = self.scan_path(job) if callable(self.scan_path) else self.scan_path
+        if scan:
+            from .scanner import Scanner
+            self.scanner = Scanner(scan, geo, self.scan_dpi, dot_diameter_um(self.profile, self.faults),
+                                   self.faults, slack_um=self._y_slack_nm / 1000,
+                                   swath_um=self.profile.swath_rows * row_nm / 1000)
         self.log("job_begin", **self.job)
 
     def job_end(self, job: int) -> None:
@@ -482,6 +511,9 @@ class Printer:
                          # edge, and image row 0's paper position after JOB_BEGIN
                          left_mm=round((self.job["x0"] - self.paper_edges[0]) / cpi * 25.4, 3),
                          lead_mm=round(self.job["y0"] * self.job["row_nm"] / 1e6, 3))
+            if self.scanner is not None:
+                stats["scan"] = self.scanner.path
+            self._close_scan()
             self.jobs_done[job] = stats
             self.log("job_end", job=job, **stats)
         self.media = None
@@ -491,6 +523,7 @@ class Printer:
         """The host gave up on the open job (it failed or was cancelled and will not be
         resumed): its media file is completed with what landed and blank paper after it,
         so what the printer did can be inspected (app/api.py)."""
+        self._close_scan()
         if self.media:
             self.media.close()
             self.log("job_abandoned", job=self.job["job"] if self.job else None,
@@ -505,14 +538,33 @@ class Printer:
     def before_job_end(self) -> None:
         """Called before the job's media is closed."""
 
+    def _close_scan(self) -> None:
+        if self.scanner is not None:
+            self.scanner.close()
+            self.log("scan", path=self.scanner.path, dpi=self.scanner.dpi,
+                     drops=self.scanner.drops, late=self.scanner.late)
+            self.scans[self.scanner.path] = self.scanner       # closed: its geometry, for tests
+            self.scanner = None
+
+    def paper_nm(self) -> float:
+        """The paper's travel since JOB_BEGIN: its feed steps, plus the injected feed error."""
+        return ((self.paper_steps - self.job["paper0"]) * self.profile.feed_um_per_step * 1000
+                + self.paper_extra_nm - self._extra0)
+
     def _flush_media(self) -> None:
         if self.media and self.job:
             self.before_media_flush()
-            paper_nm = (self.paper_steps - self.job["paper0"]) * self.profile.feed_um_per_step * 1000
-            self.media.flush_below(int(math.floor(paper_nm / self.job["row_nm"])) - self.job["y0"])
+            paper_nm = self.paper_nm()
+            self.media.flush_below(int(math.floor((paper_nm - self._y_slack_nm) / self.job["row_nm"]))
+                                   - self.job["y0"])
+            if self.scanner is not None:
+                self.scanner.flush_below(paper_nm / 1000 - self.job["y0"] * self.job["row_nm"] / 1000)
 
-    def land_drops(self, head: int, columns: np.ndarray, words: np.ndarray, forward: bool) -> None:
-        """Drops of one head for fires at these trigger columns: words (fires, 8)."""
+    def land_drops(self, head: int, columns: np.ndarray, words: np.ndarray, forward: bool,
+                   velocity: np.ndarray | None = None, line_speed: float = 0.0) -> None:
+        """Drops of one head for fires at these trigger columns: words (fires, 8); the
+        carriage's signed speed at each fire and the line's speed (counts/s) place them
+        physically when a scan is made (docs/physical.md)."""
         prof, job = self.profile, self.job
         hd = self.heads[head]
         hd.fires += columns.size
@@ -525,16 +577,17 @@ class Printer:
             if n:
                 self.log("drops_without_job", head=head, drops=n)
             return
-        geo = prof.heads[head]
-        k = job["k"]
+        h = prof.heads[head]
         # where the drops really land.  The emulated machine is perfectly built unless a
-        # misalignment is injected: reverse drops land `bidir_error` columns early, a head
-        # sits `head_error` counts off.  The profile's calibration (bidir offset, head x) is
-        # the RIP's business: a profile that matches the machine prints exactly.
-        shift = 0 if forward else -self.faults.bidir_error * k
-        shift += sum(c for name, c in self.faults.head_error if name == geo.name)
-        cols = (columns * k + geo.x_counts + shift - job["x0"]) // k
-        paper_nm = (self.paper_steps - job["paper0"]) * prof.feed_um_per_step * 1000
-        slot = geo.y_rows + prof.heads_per_color * np.arange(prof.nozzles)
-        rows = np.rint((paper_nm + slot * job["row_nm"]) / job["row_nm"]).astype(np.int64) - job["y0"]
-        self.media.land_words(geo.channel, words, cols, rows)
+        # misalignment is injected (docs/physical.md): reverse drops land `bidir-error`
+        # early, a head sits `head-error` counts or `head-offset` off, a nozzle is
+        # misdirected, the paper travels `feed-error` further.  The media holds each drop
+        # in the cell of its static position.  The profile's calibration (bidir offset,
+        # head x) is the RIP's business: a profile that matches the machine prints exactly.
+        paper_nm = self.paper_nm()
+        dcol, rows = self.geometry.grid(head, h.x_counts, self.physical.slots[head], forward, paper_nm)
+        self.media.land_words(h.channel, words, columns, rows, dcol)
+        if self.scanner is not None and velocity is not None:
+            x, y = self.physical.land(self.geometry, head, columns, words, forward, velocity,
+                                      line_speed, paper_nm / 1000)
+            self.scanner.splat(h.channel, x, y)

@@ -524,3 +524,7 @@ class ServoMove:
 
     def speed_at(self, t: float) -> float:
         return float(np.interp(t, self.traj.t, self.traj.v))
+
+    def speeds_at(self, t: np.ndarray) -> np.ndarray:
+        """Signed carriage speed (counts/s) at these times (the physical model's drops)."""
+        return np.interp(t, self.traj.t, self.traj.v)

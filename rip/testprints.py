@@ -7,8 +7,9 @@ printed through the same planner and driver as any image.
                 trigger, drives nozzles 0..117 of one head (one nozzle per fire); nozzles
                 118..126 are held on as a solid reference bar (seed 000, test 2; nozzle 127
                 stays 0 as the XJ128 requires)
-- nozzle-check: every nozzle of every head prints a short dash, staggered in eight columns,
-                so a missing dash names a dead nozzle
+- nozzle-check: every head has its own block along the sweep, in which each nozzle prints a
+                dash on an 8-step staircase, between two K frame bars: no other ink is near
+                a dash, so a missing dash names a dead nozzle (docs/physical.md)
 - bidir-align:  printed in two strokes, forward then reverse: for each candidate offset
                 o = -R..R a block of vertical bars, drawn at x by the forward stroke and at
                 x + o by the reverse stroke; the block whose bars continue straight across
@@ -32,6 +33,7 @@ from .settings import TEST_PATTERNS as PATTERNS  # noqa: E402 - light, for the C
 ALIGN_RANGE = 4          # candidate offsets -4 .. +4 columns
 ALIGN_BLOCK = 48         # columns per candidate block
 ALIGN_PITCH = 8          # columns between bars
+CHECK_STEPS = 8          # nozzle-check staircase: nozzle z prints at step z mod 8
 
 
 def align_offsets() -> list[int]:
@@ -50,6 +52,38 @@ def _slot_row(profile: Profile, head_name: str, nozzle: int, planner_s0: int) ->
         if h.name == head_name:
             return h.y_rows + profile.heads_per_color * nozzle - planner_s0, h.channel
     raise ValueError(f"no head named {head_name!r}; heads: {', '.join(h.name for h in profile.heads)}")
+
+
+@dataclass(frozen=True)
+class NozzleCheck:
+    """Where the nozzle check puts every nozzle's dash (image rows and columns, 1 pass)."""
+    dash: int                   # columns per staircase step; a dash is dash - 1 long
+    blocks: dict                # head name -> first column of its block
+    rows: dict                  # head name -> image row of nozzle 0 (its nozzle z: + hpc z)
+    heads_per_color: int
+    width: int
+    height: int
+
+    def dash_at(self, head: str, nozzle: int) -> tuple[int, int, int]:
+        """(image row, first column, end column) of one nozzle's dash."""
+        x0 = self.blocks[head] + (nozzle % CHECK_STEPS) * self.dash
+        return self.rows[head] + self.heads_per_color * nozzle, x0, x0 + self.dash - 1
+
+    @property
+    def bars(self) -> tuple[tuple[int, int], tuple[int, int]]:
+        """The two K frame bars: (first column, end column)."""
+        return (0, self.dash), (self.width - self.dash, self.width)
+
+
+def nozzle_check_layout(profile: Profile, width: int) -> NozzleCheck:
+    """Units of `dash` columns: a K bar, a gap, per head a staircase of 8 steps and a gap,
+    a K bar."""
+    units = 3 + len(profile.heads) * (CHECK_STEPS + 1)
+    dash = max(3, width // units)
+    s0, s1 = profile.usable_slots()
+    blocks = {h.name: (2 + i * (CHECK_STEPS + 1)) * dash for i, h in enumerate(profile.heads)}
+    rows = {h.name: h.y_rows - s0 for h in profile.heads}
+    return NozzleCheck(dash, blocks, rows, profile.heads_per_color, units * dash, s1 - s0)
 
 
 def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
@@ -77,13 +111,19 @@ def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
             planes[r + profile.heads_per_color * z, :, c] = 1
         return planes
     if kind == "nozzle-check":
-        dash = max(4, width // 8)
-        planes = np.zeros((rows, 8 * dash, 4), np.uint8)
+        check = nozzle_check_layout(profile, width)
+        planes = np.zeros((check.height, check.width, 4), np.uint8)
         for h in profile.heads:
             for z in range(1, profile.nozzles - 1):
-                r = h.y_rows + profile.heads_per_color * z - s0
-                x0 = (z % 8) * dash
-                planes[r, x0:x0 + dash - 1, h.channel] = 1
+                r, x0, x1 = check.dash_at(h.name, z)
+                if 0 <= r < check.height:
+                    planes[r, x0:x1, h.channel] = 1
+        for x0, x1 in check.bars:            # fiducials: every K nozzle
+            for h in profile.heads_of("K"):
+                for z in range(1, profile.nozzles - 1):
+                    r = check.rows[h.name] + check.heads_per_color * z
+                    if 0 <= r < check.height:
+                        planes[r, x0:x1, h.channel] = 1
         return planes
     if kind == "bidir-align":
         # 1-pass bidirectional: stroke 0 (forward) prints rows 0..rows-1, stroke 1 (reverse)

@@ -22,7 +22,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDialog, QDialogBut
 
 from ...rip.planes import read_planes, render_rgb
 from ...rip.profile import Profile, load_profile, save_calibration
-from ...rip.testprints import ALIGN_BLOCK, PatternJob, align_offsets
+from ...rip.testprints import ALIGN_BLOCK, PatternJob, align_offsets, nozzle_check_layout
 from .preview import qimage_from_rgb
 
 log = logging.getLogger("wideprint.gui")
@@ -100,14 +100,12 @@ def fmt_nozzles(nozzles, profile: Profile) -> str:
 
 def missing_nozzles(media: np.ndarray, profile: Profile) -> list[str]:
     """nozzle-check: heads and nozzles whose dash did not print."""
-    s0, _ = profile.usable_slots()
-    dash = media.shape[1] // 8
+    check = nozzle_check_layout(profile, media.shape[1])
     out = []
     for h in profile.heads:
         for z in range(1, profile.nozzles - 1):
-            r = h.y_rows + profile.heads_per_color * z - s0
-            x0 = (z % 8) * dash
-            if 0 <= r < media.shape[0] and not media[r, x0:x0 + dash - 1, h.channel].any():
+            r, x0, x1 = check.dash_at(h.name, z)
+            if 0 <= r < media.shape[0] and not media[r, x0:x1, h.channel].any():
                 out.append(f"{h.name}:{z}")
     return out
 

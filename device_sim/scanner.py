@@ -1,0 +1,288 @@
+"""The emulated scanner (docs/physical.md): renders the drops of one job, placed by the
+physical media model (physical.py), as an 8-bit RGB or greyscale TIFF at a chosen
+resolution — dot gain, ink colours multiplied on paper white, the scanner's blur,
+rotation, scale error, placement and noise, all seeded.
+
+Drops are splatted as they are fired into a rolling accumulator at the scan resolution
+(bilinear weights, so each drop keeps its exact centroid) and never kept; rows are
+rendered once the paper has carried them past the heads and written once every scan row
+that samples them can be made.  Memory is bounded by the job's width, never its length.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import tifffile
+from numba import njit
+
+from .faults import Faults
+from .physical import JobGeometry
+
+MARGIN_UM = 3000.0                 # paper around the image area in the scan
+STRIP = 64                         # scan rows made at a time (and the noise's seed block)
+PAPER_WHITE = np.array([0.90, 0.90, 0.88], np.float32)        # linear reflectance, R G B
+INK_RATIO = np.array([[0.10, 0.55, 0.85],                       # C: a solid's reflectance ratio
+                      [0.80, 0.12, 0.45],                       # M
+                      [0.92, 0.85, 0.10],                       # Y
+                      [0.04, 0.04, 0.045]], np.float32)         # K
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)           # Rec. 709
+
+
+@njit(cache=True, nogil=True)
+def _splat(acc, base, channel, px, py):
+    """Add one unit of ink per drop at (px, py) (pixel coordinates, pixel centres on
+    integers) with bilinear weights; returns the drops that fell on rows already rendered."""
+    rows, width = acc.shape[0], acc.shape[1]
+    late = 0
+    for i in range(px.shape[0]):
+        j0 = int(math.floor(py[i]))
+        i0 = int(math.floor(px[i]))
+        fy = py[i] - j0
+        fx = px[i] - i0
+        if j0 + 1 < base:
+            late += 1
+            continue
+        for dj in range(2):
+            r = j0 + dj - base
+            if r < 0 or r >= rows:
+                continue
+            wy = fy if dj else 1.0 - fy
+            for di in range(2):
+                c = i0 + di
+                if 0 <= c < width:
+                    acc[r, c, channel] += wy * (fx if di else 1.0 - fx)
+    return late
+
+
+@njit(cache=True, nogil=True)
+def _shade(ink, white, ratio, out):
+    """Ink amounts (rows, width, 4) -> linear reflectance (rows, width, 3): coverage
+    min(1, amount) of each ink multiplies the paper white (docs/physical.md)."""
+    for r in range(ink.shape[0]):
+        for c in range(ink.shape[1]):
+            for b in range(3):
+                v = white[b]
+                for i in range(4):
+                    a = ink[r, c, i]
+                    if a > 0.0:
+                        v *= 1.0 - min(a, 1.0) * (1.0 - ratio[i, b])
+                out[r, c, b] = v
+
+
+def disc_kernel(diameter_px: float, oversample: int = 8) -> np.ndarray:
+    """A disc of this diameter: each pixel holds the fraction of its area inside it."""
+    r = diameter_px / 2.0
+    n = int(math.ceil(r + 0.5))
+    sub = (np.arange(oversample) + 0.5) / oversample - 0.5
+    g = np.arange(-n, n + 1)
+    yy = (g[:, None, None, None] + sub[None, None, :, None])
+    xx = (g[None, :, None, None] + sub[None, None, None, :])
+    inside = (xx * xx + yy * yy) <= r * r
+    return inside.mean(axis=(2, 3)).astype(np.float32)
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    linear = np.clip(linear, 0.0, 1.0)
+    return np.where(linear <= 0.0031308, 12.92 * linear,
+                    1.055 * np.power(linear, 1 / 2.4) - 0.055) * 255.0
+
+
+LUT_SIZE = 1 << 16
+_SRGB_LUT = srgb_encode(np.arange(LUT_SIZE) / (LUT_SIZE - 1)).astype(np.float32)
+
+
+@njit(cache=True, nogil=True)
+def _encode(linear, noise, lut, out):
+    """8-bit sRGB of linear reflectance (a 65,536-entry table: within 0.05 levels of
+    srgb_encode) plus noise, rounded and clipped; all arrays flat."""
+    top = lut.shape[0] - 1
+    for i in range(linear.shape[0]):
+        j = int(min(max(linear[i], 0.0), 1.0) * top + 0.5)
+        v = np.rint(lut[j] + noise[i])
+        out[i] = 0 if v < 0 else (255 if v > 255 else np.uint8(v))
+
+
+class Scanner:
+    """The scan of one job (docs/physical.md, "The scan")."""
+
+    def __init__(self, path: str, geo: JobGeometry, dpi: float, dot_um: float,
+                 faults: Faults, slack_um: float = 0.0, swath_um: float = 20_000.0):
+        if not 50 <= dpi <= 9600:
+            raise ValueError(f"scan resolution {dpi} dpi: must be 50..9600")
+        self.path, self.geo, self.dpi = path, geo, float(dpi)
+        self.pix = 25_400.0 / self.dpi
+        self.margin_px = int(round(MARGIN_UM / self.pix))
+        self.margin_um = self.margin_px * self.pix
+        self.width = int(math.ceil(geo.width * geo.col_um / self.pix)) + 2 * self.margin_px
+        self.height = int(math.ceil(geo.height * geo.row_um / self.pix)) + 2 * self.margin_px
+        self.grey = faults.scan_mode == "grey"
+        self.seed = faults.seed
+        self.noise = float(faults.scan_noise)
+        self.slack_um = slack_um
+        self.dot_um = dot_um
+        self.kernel = disc_kernel(dot_um / self.pix)
+        self.rk = self.kernel.shape[0] // 2
+        self.sigma = faults.scan_blur.um(geo.col_um, geo.row_um) / self.pix
+        self.rb = int(math.ceil(3 * self.sigma)) + 1 if self.sigma > 0 else 0
+        # geometry: scan pixel q = A (p - c) + c + o, p the sheet's pixel
+        th = math.radians(faults.scan_rotation)
+        s = faults.scan_scale
+        self.A = s * np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+        self.Ainv = np.linalg.inv(self.A)
+        self.c = np.array([(self.width - 1) / 2.0, (self.height - 1) / 2.0])
+        self.o = np.array(faults.scan_offset, np.float64) * 1000.0 / self.pix
+        self._acc = np.zeros((int((swath_um + slack_um) / self.pix) + 2 * self.rk + 8,
+                              self.width, 4), np.float32)
+        self._a_base = -self.rk - 1            # sheet pixel row of accumulator row 0
+        self._refl: list[np.ndarray] = []      # rendered rows [r_base, r_next)
+        self._r_base = self._r_next = 0
+        self._v_next = 0
+        self.drops = 0
+        self.late = 0
+        self.closed = False
+        # the TIFF's header and contiguous pixel data, written in place row by row
+        shape = (self.height, self.width) if self.grey else (self.height, self.width, 3)
+        out = tifffile.memmap(path, shape=shape, dtype=np.uint8,
+                              photometric="minisblack" if self.grey else "rgb",
+                              resolution=(self.dpi, self.dpi), resolutionunit="INCH",
+                              description="wideprint emulator scan")
+        self._data_offset, self._row_bytes = out.offset, out[0].nbytes
+        del out
+        self._out = open(path, "r+b")
+
+    # -- coordinates -----------------------------------------------------------------------
+    def sheet_px(self, x_um, y_um) -> tuple[np.ndarray, np.ndarray]:
+        """Image-frame micrometres -> the sheet's pixel coordinates (before the scanner's
+        geometry; pixel centres on integers)."""
+        return ((np.asarray(x_um) + self.margin_um) / self.pix - 0.5,
+                (np.asarray(y_um) + self.margin_um) / self.pix - 0.5)
+
+    def paper_to_scan(self, x_um, y_um) -> tuple[np.ndarray, np.ndarray]:
+        """Image-frame micrometres -> fractional scan pixel coordinates (u, v)."""
+        px, py = self.sheet_px(x_um, y_um)
+        dx, dy = px - self.c[0], py - self.c[1]
+        u = self.A[0, 0] * dx + self.A[0, 1] * dy + self.c[0] + self.o[0]
+        v = self.A[1, 0] * dx + self.A[1, 1] * dy + self.c[1] + self.o[1]
+        return u, v
+
+    # -- drops -----------------------------------------------------------------------------
+    def splat(self, channel: int, x_um: np.ndarray, y_um: np.ndarray) -> None:
+        if x_um.size == 0:
+            return
+        px, py = self.sheet_px(x_um, y_um)
+        top = int(math.floor(float(py.max()))) + 2 - self._a_base
+        if top > self._acc.shape[0]:
+            grow = np.zeros((top - self._acc.shape[0] + 64, self.width, 4), np.float32)
+            self._acc = np.concatenate([self._acc, grow])
+        self.late += _splat(self._acc, self._a_base, channel, px, py)
+        self.drops += x_um.size
+
+    def flush_below(self, y_um: float) -> None:
+        """No drop will land above image-frame y (the paper has carried it past the heads)."""
+        done = int(math.floor((y_um - self.slack_um + self.margin_um) / self.pix - 0.5))
+        self._render(min(done, self.height))
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        try:
+            self._render(self.height + self.rk + 1)
+        finally:
+            self._out.close()
+        self._acc, self._refl = np.zeros((0, 0, 4), np.float32), []      # the geometry stays
+        self.closed = True
+
+    # -- rendering ---------------------------------------------------------------------------
+    def _render(self, done: int) -> None:
+        """Sheet rows < done receive no more drops: render what they complete, then write
+        the scan rows that can be made."""
+        upto = min(done - self.rk, self.height)
+        if upto > self._r_next:
+            self._reflectance(self._r_next, upto)
+        while self._v_next < self.height:
+            v0, v1 = self._v_next, min(self._v_next + STRIP, self.height)
+            lo, hi = self._source_rows(v0, v1)
+            if hi > self._r_next and self._r_next < self.height:
+                break
+            self._write_strip(v0, v1, lo, hi)
+            self._v_next = v1
+        if self._v_next < self.height:                       # rows no scan row needs any more
+            lo, _ = self._source_rows(self._v_next, min(self._v_next + STRIP, self.height))
+            self._drop_reflectance(lo)
+
+    def _reflectance(self, r0: int, r1: int) -> None:
+        """Render sheet rows [r0, r1) from the accumulator: dots, coverage, inks, paper."""
+        rk = self.rk
+        refl = np.empty((r1 - r0, self.width, 3), np.float32)
+        for c0 in range(r0, r1, STRIP):                 # in strips: small temporaries
+            c1 = min(c0 + STRIP, r1)
+            a0, a1 = c0 - rk, c1 + rk
+            src = np.zeros((a1 - a0, self.width, 4), np.float32)
+            s0, s1 = max(a0, self._a_base), min(a1, self._a_base + self._acc.shape[0])
+            if s1 > s0:
+                src[s0 - a0:s1 - a0] = self._acc[s0 - self._a_base:s1 - self._a_base]
+            ink = cv2.filter2D(src, -1, self.kernel, borderType=cv2.BORDER_CONSTANT)
+            _shade(ink[rk:rk + c1 - c0], PAPER_WHITE, INK_RATIO, refl[c0 - r0:c1 - r0])
+        self._refl.append(refl)
+        self._r_next = r1
+        # accumulator rows the next rendering no longer needs
+        drop = (r1 - rk) - self._a_base
+        if drop > 0:
+            keep = self._acc[drop:]
+            self._acc = np.concatenate([keep, np.zeros((drop, self.width, 4), np.float32)])
+            self._a_base += drop
+
+    def _source_rows(self, v0: int, v1: int) -> tuple[int, int]:
+        """Sheet rows [lo, hi) that scan rows [v0, v1) sample (with the blur's reach)."""
+        corners = np.array([[0, v0], [self.width - 1, v0], [0, v1 - 1], [self.width - 1, v1 - 1]],
+                           np.float64)
+        p = (corners - self.c - self.o) @ self.Ainv.T + self.c
+        lo = int(math.floor(p[:, 1].min())) - 1 - self.rb
+        hi = int(math.ceil(p[:, 1].max())) + 2 + self.rb
+        return max(lo, 0), min(max(hi, 0), self.height)
+
+    def _rows(self, lo: int, hi: int) -> np.ndarray:
+        if not self._refl:
+            return np.broadcast_to(PAPER_WHITE, (max(hi - lo, 1), self.width, 3)).copy()
+        buf = np.concatenate(self._refl) if len(self._refl) > 1 else self._refl[0]
+        self._refl = [buf]
+        lo, hi = max(lo, self._r_base), min(hi, self._r_next)
+        return buf[lo - self._r_base:hi - self._r_base] if hi > lo else \
+            np.broadcast_to(PAPER_WHITE, (1, self.width, 3)).copy()
+
+    def _drop_reflectance(self, lo: int) -> None:
+        if lo <= self._r_base or not self._refl:
+            return
+        buf = np.concatenate(self._refl) if len(self._refl) > 1 else self._refl[0]
+        n = min(lo - self._r_base, buf.shape[0])
+        self._refl = [buf[n:]] if n < buf.shape[0] else []
+        self._r_base += n
+
+    def _write_strip(self, v0: int, v1: int, lo: int, hi: int) -> None:
+        lo = max(lo, self._r_base)
+        sheet = self._rows(lo, hi)
+        if self.sigma > 0:
+            sheet = cv2.GaussianBlur(sheet, (0, 0), self.sigma, borderType=cv2.BORDER_REPLICATE)
+        # dst (u, v - v0) -> src (sheet pixel - (0, lo))
+        m = np.zeros((2, 3))
+        m[:, :2] = self.Ainv
+        m[:, 2] = self.Ainv @ (np.array([0.0, v0]) - self.c - self.o) + self.c - np.array([0.0, lo])
+        white = tuple(float(w) for w in PAPER_WHITE)
+        scan = cv2.warpAffine(np.ascontiguousarray(sheet), m, (self.width, v1 - v0),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=white)
+        if self.grey:
+            scan = scan @ LUMA
+        scan = scan.reshape(-1)
+        if self.noise > 0:
+            rng = np.random.default_rng((self.seed, v0))
+            noise = np.float32(self.noise) * rng.standard_normal(scan.shape, dtype=np.float32)
+        else:
+            noise = np.zeros(scan.shape, np.float32)
+        out = np.empty(scan.shape, np.uint8)
+        _encode(scan, noise, _SRGB_LUT, out)
+        self._out.seek(self._data_offset + v0 * self._row_bytes)
+        self._out.write(out.tobytes())
