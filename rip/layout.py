@@ -587,8 +587,7 @@ class LayoutJob(PrintableJob):
         self.plan = plan_layout(self.paths, settings, profile, paper_mm, when)
         self.width, self.height = self.plan.width, self.plan.height
         self._free: dict[tuple, list] = {}        # item key -> open RipJobs not in a run
-        self._runs_left = Counter(s.item.key for s in {(s.item.key, s.y): s
-                                                        for s in self.plan.slots}.values())
+        self._runs_left: Counter = Counter()      # item key -> runs still to come
         self._open: list = []
 
     @property
@@ -626,8 +625,8 @@ class LayoutJob(PrintableJob):
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The sheet top to bottom, (h, width, 4) uint8 0/1 bands of band_rows rows."""
-        self._runs_left = Counter(s.item.key for s in {(s.item.key, s.y): s
-                                                        for s in self.plan.slots}.values())
+        # a run per item and first row (copies side by side share it)
+        self._runs_left = Counter(key for key, _ in {(s.item.key, s.y) for s in self.plan.slots})
         rows, W, H = int(self.settings.band_rows), self.width, self.height
         slots = sorted(self.plan.slots, key=lambda s: (s.box[1], s.x))
         nxt, active, runs = 0, [], {}
