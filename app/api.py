@@ -195,6 +195,8 @@ class EmulatedPrinter:
             rip_job.close()
         result.report = dict(pj.report.as_dict(), state=result.state,
                              message=result.message or pj.report.message)
+        if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
+            result.report["layout"] = rip_job.layout.report
         if self.emulated:
             if result.state != "done":
                 self.emulator.abandon_job()      # complete its media file for inspection

@@ -223,6 +223,29 @@ def _expand(files: list[str]) -> tuple[list[str], dict[str, str]]:
     return out, problems
 
 
+def _nest_files(files: list[str], unlisted: dict, settings, profile) -> tuple[list, list]:
+    """--nest: the files grouped into nests by the start rule (rip/layout.nest_sheets);
+    the files still waiting make a last nest, since no more are coming.  A file that
+    cannot be nested stays a job of its own, failed with why (in `unlisted`)."""
+    from ..rip.layout import nest_sheets
+    sheets, waiting, bad = nest_sheets([f for f in files if f not in unlisted], settings, profile)
+    unlisted.update(bad)
+    sheets += [waiting] if waiting else []
+    alone = [f for f in files if f in unlisted]
+    return alone + [s[0] for s in sheets], [()] * len(alone) + [tuple(s[1:]) for s in sheets]
+
+
+def _layout_line(lay: dict) -> str:
+    """The layout's figures on the `print` output; for a nest, the media saved."""
+    line = (f"layout {lay['mode']}: {lay['items']} item{'s' if lay['items'] != 1 else ''} on "
+            f"{lay['width_mm']:.0f} x {lay['length_mm']:.0f} mm")
+    if lay["mode"] == "nest":
+        line += (f", {lay['saved_mm']:.0f} mm of media saved ({lay['saved_percent']:.1f} %, "
+                 f"{lay['saved_m2']:.2f} m2) against {lay['sequential_length_mm']:.0f} mm one "
+                 f"after another")
+    return line
+
+
 def cmd_print(args) -> int:
     import os
     import tempfile
@@ -330,6 +353,9 @@ def cmd_print(args) -> int:
         print(f"{shown(f, NAME_LIMIT)}: {what}: {said}", file=sys.stderr)
         return rep
 
+    extras: list[tuple] = [()] * len(files)
+    if settings.placement.nest:           # one job per nest of files (docs/layout.md)
+        files, extras = _nest_files(files, unlisted, settings, profile)
     try:
         for i, f in enumerate(files):
             job_id = base + i
@@ -343,12 +369,13 @@ def cmd_print(args) -> int:
                 reports.append(job_failed(f, unlisted[f], dict(job_id=job_id)))
                 continue
             try:
-                rip = RipJob(f, settings, profile)
+                rip = RipJob(f, settings, profile, more=extras[i])
             except (ImageError, ValueError, OSError) as exc:
                 failed += 1
                 reports.append(job_failed(f, str(exc), dict(job_id=job_id)))
                 continue
-            label = f"{i + 1}/{len(files)} {shown(Path(f).name, 60)}"
+            label = f"{i + 1}/{len(files)} {shown(Path(f).name, 60)}" \
+                + (f" +{len(extras[i])} nested" if extras[i] else "")
 
             def on_event(kind, label=label, job_id=job_id, file=f, **kw):
                 if kind == "stroke":                    # a progress bar on a terminal
@@ -379,6 +406,10 @@ def cmd_print(args) -> int:
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {shown(rep['media'])}" if rep["media"] else "")
                       + (f", scan {shown(rep['scan'])}" if rep.get("scan") else ""), file=say)
+                if rip.layout is not None:
+                    rep["layout"] = rip.layout.report
+                    rep["files"] = [f, *extras[i]]
+                    print(f"{shown(f, NAME_LIMIT)}: {_layout_line(rep['layout'])}", file=say)
                 if args.preview:
                     from ..rip.planes import write_preview
                     preview = _media_path(args.preview, i, len(files))

@@ -106,6 +106,11 @@ def _unknown_format(head: bytes) -> str:
 def _vips():
     import pyvips  # imported lazily: BMP-only use does not need libvips
 
+    # libvips' operation cache keeps every pipeline's decoded regions (up to ~150 MB of
+    # RSS) although the RIP streams each file once per read; a file read again (layout
+    # copies, docs/layout.md "Measured") or many files in one process made memory grow
+    # with the number of reads, and the cache saved no time (measured)
+    pyvips.cache_set_max(0)
     return pyvips
 
 

@@ -127,9 +127,20 @@ class RipJob(PrintableJob):
     path: str
     settings: RipSettings = field(default_factory=RipSettings)
     profile: Profile = field(default_factory=load_profile)
+    more: tuple = ()                     # further files of a nested layout (docs/layout.md)
+    paper_mm: float | None = None        # the measured paper width, when known (nesting)
 
     def __post_init__(self):
         self.settings.check(self.profile)
+        from .layout import LayoutJob, wants_layout
+        self.layout: LayoutJob | None = None
+        if wants_layout(self.settings.placement, self.more):
+            # one layout is one job: its items placed on one sheet, composed in bands
+            self.layout = LayoutJob([self.path, *self.more], self.settings, self.profile,
+                                    paper_mm=self.paper_mm)
+            self.source = None
+            self.width, self.height = self.layout.width, self.layout.height
+            return
         # the image area on the device grid: an image placed (physical size, scaled, rotated,
         # mirrored), a PDF/PostScript page rendered onto it, or RTL raster (rip/inputs.py)
         self.source: ImageSource = open_source(self.path, self.settings, self.profile)
@@ -142,6 +153,8 @@ class RipJob(PrintableJob):
         CMYK files print as they are."""
         if self.settings.ink_limit is not None:
             return self.settings.ink_limit
+        if self.layout is not None:
+            return self.layout.ink_limit
         if self.source.colorspace == "cmyk" and not getattr(self.source, "separated", False):
             return None
         return self.profile.color.ink_limit_percent
@@ -158,6 +171,9 @@ class RipJob(PrintableJob):
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
+        if self.layout is not None:
+            yield from self.layout.halftone_bands()
+            return
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
             yield from self.source.bands(self.settings.band_rows)
             return
@@ -178,6 +194,9 @@ class RipJob(PrintableJob):
         path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
         next bands (on both cores) overlaps the stroke packing of this one."""
         s = self.settings
+        if self.layout is not None:
+            yield from self.layout.packed_bands()
+            return
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
             yield from prefetch(prescreened_packed(self.source, s.band_rows), depth=1)
             return
@@ -191,4 +210,4 @@ class RipJob(PrintableJob):
         yield from prefetch((screen.process(band) for band in loaded), depth=1)
 
     def close(self) -> None:
-        self.source.close()
+        (self.layout or self.source).close()

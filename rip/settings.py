@@ -31,6 +31,7 @@ FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kerne
 ROTATIONS = (0, 90, 180, 270)                                    # degrees clockwise
 ALIGNS = ("left", "center", "right")
 PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page boxes (docs/documents.md)
+MARKS = ("none", "crop", "registration")                           # layout marks (docs/layout.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
 TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
 
@@ -62,6 +63,7 @@ class Setting:
     nonnegative: bool = False
     positive: bool = False
     labels: dict | None = None     # choice -> words for the GUI
+    section: str = ""              # the command line's option group, when not the group's own
     label: str = ""                # the GUI's name for it
     metavar: str | None = None
 
@@ -199,6 +201,46 @@ SETTINGS: tuple[Setting, ...] = (
             metavar="LIST", label="Pages"),
     Setting("page_gap_mm", float, 10.0, "PDF/PostScript: blank paper between the pages of a "
             "document", group="placement", nonnegative=True, metavar="MM", label="Page gap"),
+    # the layout on the roll: copies, nesting, tiles, marks, label (docs/layout.md)
+    Setting("repeat_across", int, 1, "step-and-repeat: copies side by side across the paper",
+            group="placement", section="layout", minimum=1, maximum=1000, metavar="N",
+            label="Copies across"),
+    Setting("repeat_along", int, 1, "step-and-repeat: rows of copies along the roll",
+            group="placement", section="layout", minimum=1, maximum=1000, metavar="N",
+            label="Copies along"),
+    Setting("gap_mm", float, 5.0, "blank paper between copies, nested items and tiles",
+            group="placement", section="layout", nonnegative=True, maximum=10000, metavar="MM",
+            label="Gap"),
+    Setting("nest", bool, False, "nest the files (and their copies) side by side across the "
+            "paper in one job, to save media", group="placement", section="layout", label="Nest"),
+    Setting("nest_copies", int, 1, "nesting: copies of each file in the nest", group="placement",
+            section="layout", minimum=1, maximum=1000, metavar="N", label="Nest copies"),
+    Setting("nest_rotate", bool, False, "nesting: items may be turned 90 degrees to pack better",
+            group="placement", section="layout", label="Nest rotation"),
+    Setting("nest_count", int, None, "nesting: start a job when it holds this many files",
+            group="placement", section="layout", nullable=True, minimum=1, maximum=100000,
+            metavar="N", label="Nest count"),
+    Setting("nest_length_mm", float, None, "nesting: start a job when it is this long",
+            group="placement", section="layout", nullable=True, positive=True, metavar="MM",
+            label="Nest length"),
+    Setting("nest_width_mm", float, None, "nesting: the width to pack into (default: the "
+            "paper less the side margins)", group="placement", section="layout", nullable=True,
+            positive=True, metavar="MM", label="Nest width"),
+    Setting("tile_width_mm", float, None, "tiling: print the image as tiles at most this wide",
+            group="placement", section="layout", nullable=True, positive=True, metavar="MM",
+            label="Tile width"),
+    Setting("tile_height_mm", float, None, "tiling: tiles at most this long", group="placement",
+            section="layout", nullable=True, positive=True, metavar="MM", label="Tile height"),
+    Setting("tile_overlap_mm", float, 0.0, "tiling: image shared by neighbouring tiles",
+            group="placement", section="layout", nonnegative=True, metavar="MM",
+            label="Tile overlap"),
+    Setting("join_marks", bool, False, "tiling: ticks where the neighbouring tile's edge goes",
+            group="placement", section="layout", label="Join marks"),
+    Setting("marks", str, "none", "crop marks, or crop and registration marks, outside each "
+            "image", group="placement", section="layout", choices=MARKS, label="Marks",
+            labels={"none": "None", "crop": "Crop marks", "registration": "Crop + registration"}),
+    Setting("label", bool, False, "a job label under each image: name, date, settings",
+            group="placement", section="layout", label="Job label"),
 )
 
 BY_NAME = {s.name: s for s in SETTINGS}
@@ -266,6 +308,22 @@ class Placement:
     page_box: str = "crop"  # PDF: crop | trim | bleed | art | media
     pages: str = "all"  # which pages, e.g. "1-3,5"; printed one after another along the roll
     page_gap_mm: float = 10.0  # blank paper between pages
+    # the layout on the roll (rip/layout.py, docs/layout.md); place() ignores these
+    repeat_across: int = 1  # step-and-repeat copies across
+    repeat_along: int = 1  # ... and along
+    gap_mm: float = 5.0  # between the boxes of copies, nested items, tiles
+    nest: bool = False  # the files (and copies) packed side by side
+    nest_copies: int = 1  # copies of each file in a nest
+    nest_rotate: bool = False  # nested items may be turned 90 degrees
+    nest_count: int | None = None  # start rule: files per nest
+    nest_length_mm: float | None = None  # start rule: nest length reached
+    nest_width_mm: float | None = None  # width to pack into; None: the paper less the margins
+    tile_width_mm: float | None = None  # tiling on when either tile size is given
+    tile_height_mm: float | None = None
+    tile_overlap_mm: float = 0.0
+    join_marks: bool = False  # tiles: ticks where the neighbour's edge goes
+    marks: str = "none"  # none | crop | registration
+    label: bool = False  # the job label under each image
 
     def check(self) -> None:
         """Raise ValueError naming the problem if the options are inconsistent."""
@@ -285,6 +343,7 @@ class Placement:
             v = getattr(self, name)
             if v is not None and _finite(name, v) < 0:
                 raise ValueError(f"placement: {name} must not be negative, not {v!r}")
+        self.check_layout()
         given = {n: getattr(self, n) for n in ("width_mm", "height_mm", "scale", "fit_width_mm")
                  if getattr(self, n) is not None}
         for name, v in given.items():
@@ -296,6 +355,34 @@ class Placement:
                                  ("scale", "scale" in given), ("fit_width_mm", "fit_width_mm" in given)) if on]
         if len(modes) > 1:
             raise ValueError(f"placement: give only one of {' or '.join(modes)}")
+
+    def check_layout(self) -> None:
+        """The layout fields' consistency (docs/layout.md, "Modes"); ValueError naming them."""
+        if self.marks not in MARKS:
+            raise ValueError(f"placement: marks must be one of {', '.join(MARKS)}, not {self.marks!r}")
+        for name in ("repeat_across", "repeat_along", "nest_copies"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"placement: {name} must be a whole number >= 1, not {v!r}")
+        for name in ("gap_mm", "tile_overlap_mm"):
+            if _finite(name, getattr(self, name)) < 0:
+                raise ValueError(f"placement: {name} must not be negative, not {getattr(self, name)!r}")
+        for name in ("nest_length_mm", "nest_width_mm", "tile_width_mm", "tile_height_mm"):
+            if getattr(self, name) is not None:
+                _positive(name, getattr(self, name))
+        repeat = self.repeat_across > 1 or self.repeat_along > 1
+        tiles = self.tile_width_mm is not None or self.tile_height_mm is not None
+        if tiles and (self.nest or repeat):
+            raise ValueError("placement: tiling (tile_width_mm/tile_height_mm) cannot be combined with "
+                             + ("nest" if self.nest else "repeat_across/repeat_along"))
+        if self.nest and repeat:
+            raise ValueError("placement: nest packs the files side by side; give nest_copies for "
+                             "copies, not repeat_across/repeat_along")
+        for name in ("tile_width_mm", "tile_height_mm"):
+            t = getattr(self, name)
+            if t is not None and float(self.tile_overlap_mm) >= float(t):
+                raise ValueError(f"placement: tile_overlap_mm {float(self.tile_overlap_mm):g} must be "
+                                 f"smaller than {name} {float(t):g}")
 
     @property
     def quarter_turn(self) -> bool:
@@ -490,8 +577,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     `print` and `rip` fill in the schema's defaults, `submit` lets the preset's stand."""
     rip = parser.add_argument_group("RIP settings (docs/settings.md)")
     place = parser.add_argument_group("placement (docs/placement.md)")
+    layout = parser.add_argument_group("layout on the roll (docs/layout.md)")
     for s in SETTINGS:
-        group = place if s.group == "placement" else rip
+        group = layout if s.section == "layout" else place if s.group == "placement" else rip
         default = "" if s.default is None else f" (default {_cli_value(s.default)})"
         if s.kind is bool:
             group.add_argument(s.flag, dest=s.name, action=argparse.BooleanOptionalAction,
