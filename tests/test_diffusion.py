@@ -1,4 +1,5 @@
-"""Issue 18: the variable-coefficient error diffusion (vced, vector), the 256 px screen and
+"""Issue 18: the variable-coefficient error diffusion (vced, vector), the 256 px screen (tone,
+determinism, seams, C/M overlap, its mask against the bound of nested patterns) and
 colour-aware placement - tone, seams, determinism, structure, C/M overlap and grain.
 (The generic band-split, extremes, density and argument tests in test_halftone.py run for
 every method, these two included.)"""
@@ -87,7 +88,7 @@ def test_tuned_strength_is_reproducible():
 # tone, seams, determinism
 # --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("method", VARIABLE)
+@pytest.mark.parametrize("method", VARIABLE + ("bluenoise",))
 def test_tone_exact_on_every_tint(method):
     """Every ink 1..254 on a 192 x 256 patch (4 inks at once): density within 0.5 % of
     ink / 255; the lightest tints still get dots and the darkest still get holes."""
@@ -125,7 +126,7 @@ def test_seamless_across_bands_through_the_rip(method, tmp_path, profile):
         assert np.array_equal(p, planes[0])
 
 
-@pytest.mark.parametrize("method", VARIABLE)
+@pytest.mark.parametrize("method", VARIABLE + ("bluenoise",))
 def test_deterministic_and_thread_independent(method):
     """Same input, same dots: run to run, and whether the band runs on the worker pool (big
     bands) or in the calling thread (one row at a time)."""
