@@ -35,8 +35,11 @@ screen) on a PostScript wrapper of the raw CMYK planes (the planes pass unchange
 colour conversion between DeviceCMYK and the CMYK device); ImageMagick 6 (/usr/bin/convert)
 ``-dither FloydSteinberg -remap pattern:gray50`` and ``-ordered-dither o8x8`` per plane.
 References inside wideprint: ``ostromoukhov`` (Ostromoukhov 2001, his published table, no
-modulation: the issue's yardstick) and ``bluenoise128`` (the screen before this work: the
-128 px mask with its old channel offsets).  No assertions: a measurement; the targets of the
+modulation: the issue's yardstick), ``bluenoise128`` (the screen before this work: the
+128 px mask with its old channel offsets) and ``bluenoise256`` (the first 256 px screen of
+this work, now vced's modulation mask, in today's channel layout).  Below the table: every
+screen mask's noise over all 254 ink levels against the bound no threshold mask can beat
+(``rip.bluenoise.nested_bound``).  No assertions: a measurement; the targets of the
 issue are printed with met / MISSED.
 """
 
@@ -160,10 +163,29 @@ def text() -> np.ndarray:
 # wideprint's methods (and the references)
 
 
+def _screen(ranks: np.ndarray, offsets, inverted=None):
+    """An ordered screen with the given rank mask and channel layout, as a callable."""
+    from wideprint.rip.halftone import threshold_tile
+    n = ranks.shape[0]
+    t = threshold_tile(ranks)
+    t_inv = threshold_tile(ranks.size - 1 - ranks.astype(np.int64))
+
+    def run(cmyk):
+        h, w = cmyk.shape[:2]
+        out = np.empty_like(cmyk)
+        for k, (ox, oy) in enumerate(offsets):
+            tile = np.roll(t_inv if inverted is not None and inverted[k] else t,
+                           (-int(oy), -int(ox)), axis=(0, 1))
+            big = np.tile(tile, (-(-h // n), -(-w // n)))[:h, :w]
+            out[:, :, k] = cmyk[:, :, k] > big
+        return out
+    return run
+
+
 def wideprint_methods() -> dict:
     from wideprint.rip.diffusion import VCDiffuser
-    from wideprint.rip.halftone import (Halftoner, load_bluenoise_mask, mask_offsets,
-                                        modulation_noise, threshold_tile)
+    from wideprint.rip.halftone import (Halftoner, load_bluenoise_mask, load_modulation_mask,
+                                        mask_offsets, modulation_noise, screen_layout)
 
     def ht(method):
         def run(cmyk):
@@ -175,22 +197,27 @@ def wideprint_methods() -> dict:
         return VCDiffuser(cmyk.shape[1], 4, modulation_noise(), table="ostromoukhov",
                           strength="ostromoukhov", next_boost=1.0).process(cmyk)
 
-    def bluenoise128(cmyk):      # the screen before issue 18
-        ranks = load_bluenoise_mask()
-        n = ranks.shape[0]
-        t = threshold_tile(ranks)
-        h, w = cmyk.shape[:2]
-        out = np.empty_like(cmyk)
-        for k, (ox, oy) in enumerate(mask_offsets(n, 4)):
-            tile = np.roll(t, (-int(oy), -int(ox)), axis=(0, 1))
-            big = np.tile(tile, (-(-h // n), -(-w // n)))[:h, :w]
-            out[:, :, k] = cmyk[:, :, k] > big
-        return out
-
     m = {name: ht(name) for name in ("vced", "vector", "fs", "jarvis", "stucki", "bluenoise", "bayer")}
     m["ostromoukhov"] = ostromoukhov
-    m["bluenoise128"] = bluenoise128
+    # the screen before issue 18 (the 128 px mask, its old channel offsets), and the first
+    # 256 px screen of issue 18 (now the modulation mask; today's channel layout)
+    m["bluenoise128"] = _screen(load_bluenoise_mask(), mask_offsets(128, 4))
+    m["bluenoise256"] = _screen(load_modulation_mask(), *screen_layout(256, 4))
     return m
+
+
+def mask_levels() -> list[tuple[str, float, float]]:
+    """(name, coarse, fine): each screen mask's noise over all ink levels 1..254 (RMS of
+    ``rip.bluenoise.level_noise``), first the bound no threshold mask can beat."""
+    from wideprint.rip.bluenoise import level_noise, nested_bound
+    from wideprint.rip.halftone import (bayer_matrix, load_bluenoise_mask, load_modulation_mask,
+                                        load_screen_mask)
+    rows = [("bound (any threshold mask)", nested_bound(hvs.COARSE), nested_bound(hvs.FINE))]
+    for name, ranks in (("bluenoise", load_screen_mask()), ("bluenoise256", load_modulation_mask()),
+                        ("bluenoise128", load_bluenoise_mask()), ("bayer", bayer_matrix(16))):
+        rows.append((name, *(float(np.sqrt(np.mean(level_noise(ranks, s) ** 2)))
+                             for s in (hvs.COARSE, hvs.FINE))))
+    return rows
 
 
 # ------------------------------------------------------------------------------------------
@@ -366,11 +393,12 @@ def print_targets(res: dict) -> None:
     for peer in ("gs tiffscaled4", "imagemagick FS"):
         rows.append((f"vced / {peer}, photo fine", ratio("vced", peer, "photo_fine")))
         rows.append((f"vced / {peer}, photo coarse", ratio("vced", peer, "photo_coarse")))
-    for key, label in (("tint_coarse", "tints coarse"), ("photo_coarse", "photo coarse"),
-                       ("photo2_coarse", "photo x2 coarse"), ("tint_lf", "tints LF share")):
-        rows.append((f"bluenoise / bluenoise128, {label}", ratio("bluenoise", "bluenoise128", key)))
+    for ref in ("bluenoise128", "bluenoise256"):
+        for key, label in (("tint_coarse", "tints coarse"), ("photo_coarse", "photo coarse"),
+                           ("photo_fine", "photo fine"), ("photo2_coarse", "photo x2 coarse"),
+                           ("tint_lf", "tints LF share"), ("mix_grain", "mixed-tint grain")):
+            rows.append((f"bluenoise / {ref}, {label}", ratio("bluenoise", ref, key)))
     rows.append(("vector / vced, mixed-tint grain", ratio("vector", "vced", "mix_grain")))
-    rows.append(("bluenoise / bluenoise128, mixed-tint grain", ratio("bluenoise", "bluenoise128", "mix_grain")))
     for label, v in rows:
         print(f"  {label:48s} {v:6.3f}")
 
@@ -396,6 +424,11 @@ def print_targets(res: dict) -> None:
         print(f"  bluenoise coarse-scale noise halved against the 128 px mask: tints "
               f"{b['tint_coarse'] / b0['tint_coarse']:.2f}x, photo {b['photo_coarse'] / b0['photo_coarse']:.2f}x: "
               f"{verdict(b['tint_coarse'] <= 0.5 * b0['tint_coarse'])}")
+        levels = {name: (c, f) for name, c, f in mask_levels()}
+        bound = levels.pop("bound (any threshold mask)")
+        print(f"    (no threshold mask can: over all ink levels the coarse noise is at least "
+              f"{bound[0]:.5f}, {bound[0] / levels['bluenoise128'][0]:.2f}x the 128 px mask's; "
+              f"bluenoise is at {levels['bluenoise'][0] / bound[0]:.2f}x the bound)")
     for name in ("vector", "bluenoise"):
         if res.get(name) and res.get("vced"):
             print(f"  {name}: C/M overlap in equal light tints {res[name]['cm_overlap']:.2f} x independent "
@@ -443,6 +476,12 @@ def main(argv=None) -> int:
             print(f"  scored {name} in {results[name]['seconds'] if results[name] else 0:.1f} s",
                   file=sys.stderr, flush=True)
         print_table(results)
+        print()
+        print("screen masks over every ink level 1..254 (RMS of the blurred error of each flat tint, "
+              "rip.bluenoise.level_noise / nested_bound)")
+        print(f"  {'mask':28s} {'coarse':>9s} {'fine':>9s}")
+        for name, c, f in mask_levels():
+            print(f"  {name:28s} {c:9.5f} {f:9.5f}")
         print_targets(results)
     finally:
         if not args.keep:

@@ -31,6 +31,12 @@ result is deterministic for a given ``size``, ``sigma`` and ``seed``.
 Usage::
 
     python -m wideprint.rip.bluenoise --size 128 --out resources/masks/bluenoise128.npy
+    python -m wideprint.rip.bluenoise --screen --size 256 --out resources/masks/screen256.npy
+
+``screen_mask`` is the same algorithm compiled, on the anisotropic device grid and with a
+second, wide Gaussian in the energy (the screen); ``level_noise`` and ``nested_bound``
+measure a mask against the eye model of bench/hvs.py and against what no threshold mask
+can beat.
 """
 
 from __future__ import annotations
@@ -151,8 +157,15 @@ SCREEN_SIZE = 256
 SCREEN_SIGMA = 1.5
 SCREEN_ASPECT = 370.5 / 300.0   # rows per inch / columns per inch of the device grid
 SCREEN_SEED = 0
-SCREEN_WIDE = 4.0               # plus 0.3 x a Gaussian of 4 px: fewer large voids and clusters
-SCREEN_WIDE_WEIGHT = 0.3
+# plus 0.9 x a Gaussian of 2.5 sqrt(2) px: the autocorrelation of the eye model's coarse blur
+# (bench/hvs.py, 2.5 px), so "largest void" is where the pattern's coarse-scale error is most
+# negative - the energy the coarse HVS score measures (resources/masks/README.md)
+SCREEN_WIDE = 2.5 * np.sqrt(2.0)
+SCREEN_WIDE_WEIGHT = 0.9
+# the threshold modulation of vced / vector (resources/masks/bluenoise256.npy, the screen
+# before): 1.5 px plus 0.3 x a Gaussian of 4 px
+MODULATION_WIDE = 4.0
+MODULATION_WIDE_WEIGHT = 0.3
 
 
 def _local_kernel(sigma: float, aspect: float, wide: float = 0.0, wide_weight: float = 0.0) -> np.ndarray:
@@ -249,7 +262,8 @@ def screen_mask(size: int = SCREEN_SIZE, sigma: float = SCREEN_SIGMA,
     """Void-and-cluster rank mask for the device grid: the energy's Gaussian is sigma
     columns across and sigma * aspect rows along, so the dots are evenly spread in
     *physical* distance on the 300 x 370.5 dpi grid (a square-pixel mask is squeezed along
-    the feed there).  Otherwise as ``void_and_cluster`` (compiled: about a minute for 256)."""
+    the feed there), plus ``wide_weight`` x a Gaussian of ``wide`` (both peak 1).  Otherwise
+    as ``void_and_cluster`` (compiled: 15-60 s for 256)."""
     if size < 2:
         raise ValueError("size must be >= 2")
     n = size * size
@@ -263,6 +277,58 @@ def screen_mask(size: int = SCREEN_SIZE, sigma: float = SCREEN_SIGMA,
     ranks = _vac_compiled()(pattern, k, ones)
     check_permutation(ranks)
     return ranks.reshape(size, size).astype(np.uint16 if n <= 1 << 16 else np.uint32)
+
+
+def modulation_mask() -> np.ndarray:
+    """The rank mask vced / vector read as their threshold modulation
+    (resources/masks/bluenoise256.npy): ``screen_mask`` with the 4 px wide term."""
+    return screen_mask(wide=MODULATION_WIDE, wide_weight=MODULATION_WIDE_WEIGHT)
+
+
+# --------------------------------------------------------------------------
+# how good a threshold mask can be: every level's coarse noise, and the bound
+# --------------------------------------------------------------------------
+
+def _blur_response(shape: tuple[int, int], sigma: float, aspect: float) -> np.ndarray:
+    """Frequency response of the eye model's Gaussian (bench/hvs.py) on a periodic tile."""
+    fy = np.fft.fftfreq(shape[0])[:, None]
+    fx = np.fft.fftfreq(shape[1])[None, :]
+    return np.exp(-2 * np.pi ** 2 * ((sigma * fx) ** 2 + (sigma * aspect * fy) ** 2))
+
+
+def level_noise(ranks: np.ndarray, sigma: float, aspect: float = SCREEN_ASPECT) -> np.ndarray:
+    """(254,) RMS of the blurred error (dots - ink) of the tile's flat tint at every ink level
+    1..254 as the screen thresholds it (``rank * 255 + 127 < ink * N``), on the torus: the
+    noise a viewer sees at that blur (sigma columns across, sigma * aspect rows along)."""
+    r = np.asarray(ranks, np.int64)
+    n_pix = r.size
+    thr = (r * 255 + 127) // n_pix
+    g = _blur_response(r.shape, sigma, aspect)
+    out = np.empty(254)
+    for v in range(1, 255):
+        e = (thr < v).astype(np.float64)
+        e -= e.mean()
+        b = np.fft.ifft2(np.fft.fft2(e) * g).real
+        out[v - 1] = np.sqrt(np.mean(b * b))
+    return out
+
+
+def nested_bound(sigma: float, aspect: float = SCREEN_ASPECT, size: int = SCREEN_SIZE) -> float:
+    """Lower bound on the RMS over ink levels of ``level_noise`` for *any* threshold mask.
+
+    A threshold mask's patterns are nested: raising the ink only adds dots.  Follow one
+    pixel x through the levels: its blurred error s(x) falls steadily (the tint's mean
+    rises by 1 per unit of ink; the blur sums to 1) and jumps up by g(x - y) whenever a
+    pixel y turns on, and every pixel turns on exactly once.  A path that falls at slope 1
+    must fall back through every value a jump passed over, so the time spent at |s| = u
+    is at least the number of jumps across u, and the mean of s^2 over the levels is at
+    least sum_k h_k^3 / 12 (each jump of h best centred on 0: the integral of u^2 over
+    [-h/2, h/2]).  Hence mean_levels(noise^2) >= sum_y g(y)^3 / 12 at every pixel, whatever
+    the order - the price of the stacking constraint.  (Continuous levels; the 255 steps
+    only add.)  A single pattern, free of it, can go far below (direct binary search,
+    error diffusion); resources/masks/README.md has the figures."""
+    g = np.fft.ifft2(_blur_response((size, size), sigma, aspect)).real
+    return float(np.sqrt(np.sum(g ** 3) / 12.0))
 
 
 def check_permutation(ranks: np.ndarray) -> None:
@@ -282,14 +348,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of the initial random pattern (default 0)")
     ap.add_argument("--screen", action="store_true",
                     help="the screen mask: compiled void-and-cluster on the device grid "
-                         "(--aspect, default 370.5/300; resources/masks/bluenoise256.npy is "
-                         "--screen --size 256 --sigma 1.5 --seed 0)")
+                         "(--aspect, default 370.5/300; resources/masks/screen256.npy is "
+                         "--screen --size 256 --sigma 1.5 --seed 0, bluenoise256.npy the same "
+                         "with --wide 4 --wide-weight 0.3)")
     ap.add_argument("--aspect", type=float, default=SCREEN_ASPECT,
                     help="with --screen: rows per column of equal physical length")
     ap.add_argument("--wide", type=float, default=SCREEN_WIDE,
-                    help="with --screen: sigma of the second, wide Gaussian (default 4)")
+                    help="with --screen: sigma of the second, wide Gaussian (default 2.5 x sqrt 2)")
     ap.add_argument("--wide-weight", type=float, default=SCREEN_WIDE_WEIGHT,
-                    help="with --screen: its weight (default 0.3; 0: a single Gaussian)")
+                    help="with --screen: its weight (default 0.9; 0: a single Gaussian)")
     ap.add_argument("--out", type=Path, required=True, help="output .npy path")
     args = ap.parse_args(argv)
 

@@ -15,11 +15,12 @@ Methods (``METHODS``)
 ---------------------
 ``vced`` (the default), ``vector``: variable-coefficient error diffusion with
 threshold modulation (rip/diffusion.py: Zhou-Fang's weights, the next pixel's
-weight x 1.15 for the 300 x 370.5 grid, a blue-noise modulation from the screen
-mask tuned per level to leave no periodic structure).  ``vced`` diffuses every
-ink on its own; ``vector`` decides C and M jointly (at most one of the two
-dots where C + M <= 100 %, at least one beyond; the pair's dots form one
-blue-noise pattern), Y and K on their own.  Serpentine on the absolute row,
+weight x 1.15 for the 300 x 370.5 grid, a blue-noise modulation from
+``bluenoise256.npy`` tuned per level to leave no periodic structure).  ``vced``
+diffuses every ink on its own; ``vector`` decides C and M jointly (at most one
+of the two dots where C + M <= 100 %, at least one beyond; the pair's dots form
+one blue-noise pattern; which ink a single dot goes to is modulated too), Y and
+K on their own.  Serpentine on the absolute row,
 integer arithmetic, the error rows kept between bands as for ``fs``: identical
 bits for any band split.  Ink 0 never gets a drop, ink 255 always one.
 
@@ -51,10 +52,11 @@ diffusion.
 
 ``bayer``, ``bluenoise``: ordered dither with a threshold mask of n x n ranks
 (N = n*n): the 16x16 recursive Bayer index matrix, or the shipped 256x256
-blue-noise screen mask ``resources/masks/bluenoise256.npy`` (void-and-cluster on
-the anisotropic device grid, see :mod:`wideprint.rip.bluenoise` and
-resources/masks/README.md; the 128x128 ``bluenoise128.npy`` is the pass masks'
-tile, rip/swath.py).  A pixel gets a drop when
+blue-noise screen mask ``resources/masks/screen256.npy`` (void-and-cluster on
+the anisotropic device grid, its energy the eye model's coarse-scale filter, see
+:mod:`wideprint.rip.bluenoise` and resources/masks/README.md; the 128x128
+``bluenoise128.npy`` is the pass masks' tile, rip/swath.py; ``bluenoise256.npy``
+the modulation of ``vced`` and ``vector``).  A pixel gets a drop when
 ``ink * N > rank * 255 + 127``, precomputed as an 8-bit threshold
 ``T = (rank * 255 + 127) // N`` with ``drop = ink > T``.  So ink 0 gives no
 drops, 255 gives all, and a constant ink v gives ``ceil((v N - 127) / 255)``
@@ -113,15 +115,16 @@ from numba import njit
 
 from .parallel import WORKERS, run_parallel
 
-__all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "load_screen_mask",
-           "mask_offsets", "screen_layout", "threshold_tile"]
+__all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "load_modulation_mask",
+           "load_screen_mask", "mask_offsets", "screen_layout", "threshold_tile"]
 
 from .settings import METHODS, ORDERED  # noqa: E402 - declared with the settings schema
 ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
 MASKS = Path(__file__).resolve().parent.parent / "resources" / "masks"
 BLUENOISE_PATH = MASKS / "bluenoise128.npy"       # the pass masks' tile (rip/swath.py)
-SCREEN_PATH = MASKS / "bluenoise256.npy"          # the bluenoise screen and vced's modulation
+SCREEN_PATH = MASKS / "screen256.npy"             # the bluenoise screen
+MODULATION_PATH = MASKS / "bluenoise256.npy"      # vced's and vector's threshold modulation
 #: error diffusion with variable coefficients (rip/diffusion.py): independent channels, and
 #: colour-aware pairs (C with M, Y with K)
 VARIABLE = ("vced", "vector")
@@ -338,15 +341,22 @@ def load_bluenoise_mask(path: str | os.PathLike | None = None) -> np.ndarray:
 
 def load_screen_mask(path: str | os.PathLike | None = None) -> np.ndarray:
     """The shipped 256x256 screen rank mask (read-only, cached): the ``bluenoise`` screen
-    and the threshold modulation of ``vced`` / ``vector`` (resources/masks/README.md)."""
+    (resources/masks/README.md)."""
     return _bluenoise_cached(str(SCREEN_PATH if path is None else path))
+
+
+def load_modulation_mask() -> np.ndarray:
+    """The shipped 256x256 rank mask of ``vced`` / ``vector``'s threshold modulation
+    (read-only, cached; the screen mask before the coarse-scale one, kept because the
+    modulation strength is tuned on it)."""
+    return _bluenoise_cached(str(MODULATION_PATH))
 
 
 @functools.lru_cache(maxsize=None)
 def modulation_noise() -> np.ndarray:
-    """The screen mask as uint8 noise 0..255 (each value on n*n/256 pixels): the threshold
+    """The modulation mask as uint8 noise 0..255 (each value on n*n/256 pixels): the threshold
     modulation of the variable-coefficient error diffusion."""
-    ranks = load_screen_mask().astype(np.int64)
+    ranks = load_modulation_mask().astype(np.int64)
     noise = (ranks * 256 // ranks.size).astype(np.uint8)
     noise.setflags(write=False)
     return noise
