@@ -146,7 +146,9 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
         mirror = bool(rs.placement.mirror)
         quarter = rotate in (90, 270)
         from ..rip.inputs import sniff_input
-        if sniff_input(path) != "image":
+        if job.layout is not None:
+            dots, desc, warnings, resampled = _layout_preview(job, pw, ph, copies, max_px, cancelled)
+        elif sniff_input(path) != "image":
             dots, desc, warnings, resampled = _document_preview(job, pw, ph, cancelled)
         else:
             src = open_image(path)
@@ -205,6 +207,71 @@ def _document_preview(job, pw: int, ph: int, cancelled):
     ink = sep.convert(small)
     dots = Halftoner(job.settings.dither, pw, channels=4).process(np.ascontiguousarray(ink))
     return dots, desc, list(getattr(sep, "warnings", [])), (pw, ph) != (W, H)
+
+
+def _layout_preview(job, pw: int, ph: int, copies: int, max_px: int, cancelled):
+    """A layout (docs/layout.md): each distinct item previewed once (the same code, at the
+    sheet preview's scale), pasted where the plan puts its slots (a tile: its crop of the
+    item), and the marks and label drawn from their own masks, reduced; so the operator sees
+    items, gaps, marks and tile seams before printing, in memory bounded by the preview."""
+    import cv2
+    from ..rip.layout import item_settings
+    plan = job.layout.plan
+    sx, sy = pw / plan.width, ph / plan.height
+    canvas = np.zeros((ph, pw, 4), np.uint8)
+    cache: dict = {}
+    warnings: list = []
+    for slot in plan.slots:
+        if cancelled():
+            raise InterruptedError
+        it = slot.item
+        key = (it.path, it.turn)
+        if key not in cache:
+            rs = item_settings(job.settings, it.turn)
+            # the whole placed item, at the sheet's preview scale
+            probe = RipJob(it.path, rs, job.profile)
+            try:
+                iw, ih = probe.width, probe.height
+            finally:
+                probe.close()
+            side = max(1, int(round(max(iw * sx, ih * sy))))
+            sub = compute_preview(it.path, rs, job.profile, 1, max_px=max(8, min(max_px, side)))
+            cache[key] = (sub, iw, ih)
+            warnings.extend(w for w in sub.warnings if w not in warnings)
+        sub, iw, ih = cache[key]
+        d = sub.dots
+        if it.crop is not None:                          # a tile: its part of the item
+            x0, y0, x1, y1 = it.crop
+            fy, fx = d.shape[0] / ih, d.shape[1] / iw
+            d = d[int(y0 * fy):max(int(y0 * fy) + 1, int(round(y1 * fy))),
+                  int(x0 * fx):max(int(x0 * fx) + 1, int(round(x1 * fx)))]
+        x, y = int(round(slot.x * sx)), int(round(slot.y * sy))
+        w = max(1, int(round(it.width * sx)))
+        h = max(1, int(round(it.height * sy)))
+        w, h = min(w, pw - x), min(h, ph - y)
+        if w <= 0 or h <= 0:
+            continue
+        if d.shape[:2] != (h, w):
+            d = cv2.resize(d, (w, h), interpolation=cv2.INTER_NEAREST).reshape(h, w, 4)
+        canvas[y:y + h, x:x + w] = np.maximum(canvas[y:y + h, x:x + w], d)
+    for m in plan.marks():
+        x, y = int(m.x * sx), int(m.y * sy)
+        w = max(1, int(round(m.w * sx)))
+        h = max(1, int(round(m.h * sy)))
+        w, h = min(w, pw - x), min(h, ph - y)
+        if w <= 0 or h <= 0:
+            continue
+        mask = m.mask()
+        if mask is None:
+            on = np.ones((h, w), bool)
+        else:
+            on = cv2.resize(mask.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.2
+        for c in m.inks:
+            canvas[y:y + h, x:x + w, c] |= on
+    n = len(plan.slots)
+    desc = f"layout ({plan.mode}): {n} item{'s' if n != 1 else ''} on {plan.width_mm:,.0f} × " \
+           f"{plan.height_mm:,.0f} mm"
+    return canvas, desc, warnings, True
 
 
 def render_separations(dots: np.ndarray, enabled) -> np.ndarray:

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from wideprint.rip.planes import PlanesWriter, preview_image
 
@@ -68,3 +69,38 @@ print(img.shape[0], img.shape[1], base, peak)
     assert ph == 2000 and abs(pw / ph - (1000 / (80000 / 370.5 * 25.4))) < 0.01
     # the print is 3.8 GB of dots; the preview may not grow the process by more than 150 MB
     assert peak - base < 150_000, (base, peak)
+
+
+def test_a_layout_previews_its_items_marks_and_gaps(tmp_path):
+    """The job preview of a step-and-repeat (app/jobpreview.py, the server's and so the
+    GUI's): every slot of the plan carries the item's ink, the gaps between them none, the
+    crop marks are there, and the estimate is the whole sheet's."""
+    from conftest import random_planes, write_cmyk_tiff
+    from wideprint.app.jobpreview import compute_preview
+    from wideprint.rip.profile import load_profile
+    from wideprint.rip.settings import from_mapping
+    from wideprint.rip.layout import plan_layout
+    prof = load_profile()
+    f = write_cmyk_tiff(tmp_path / "item.tif", random_planes(120, 160, density=0.5, seed=3))
+    rs = from_mapping({"placement": {"size": "pixels", "repeat_across": 3, "repeat_along": 2,
+                                     "gap_mm": 10, "marks": "crop"}}, prof)
+    pd = compute_preview(str(f), rs, prof, max_px=600)
+    plan = plan_layout([str(f)], rs, prof)
+    assert (pd.width_dots, pd.height_rows) == (plan.width, plan.height)
+    d = pd.dots.any(axis=2)
+    sx, sy = d.shape[1] / plan.width, d.shape[0] / plan.height
+    assert len(plan.slots) == 6
+    covered = np.zeros_like(d)
+    for s in plan.slots:
+        x0, y0 = int(s.x * sx) + 1, int(s.y * sy) + 1
+        x1, y1 = int((s.x + s.item.width) * sx) - 1, int((s.y + s.item.height) * sy) - 1
+        assert d[y0:y1, x0:x1].mean() > 0.5, s           # the item's ink (50 % per ink)
+        bx, by, bw, bh = s.box
+        covered[max(0, int(by * sy) - 1):int((by + bh) * sy) + 1,
+                max(0, int(bx * sx) - 1):int((bx + bw) * sx) + 1] = True
+    assert not d[~covered].any()                          # gaps between the slots: paper
+    marks = [m for m in plan.marks() if m.kind == "crop"]
+    assert marks and all(d[int(m.y * sy):int((m.y + m.h) * sy) + 1,
+                           int(m.x * sx):int((m.x + m.w) * sx) + 1].any() for m in marks)
+    whole = pd.estimate
+    assert whole.area_m2 == pytest.approx(plan.width_mm * plan.height_mm * 1e-6)
