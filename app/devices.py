@@ -42,7 +42,7 @@ def parse_inject(items: list[str] | None):
 def open_device(spec: str, profile: "Profile", faults=None, media_path=None, event_log=None,
                 machine_profile: "Profile | None" = None, *,
                 printer_class=None, wrap: Callable | None = None, inject: list[str] | None = None,
-                **emulator_options) -> Device:
+                live=None, **emulator_options) -> Device:
     """Open the device a spec names.
 
     For the in-process emulator: it is built from `machine_profile` (the machine as it
@@ -60,9 +60,14 @@ def open_device(spec: str, profile: "Profile", faults=None, media_path=None, eve
     if spec in EMULATOR_SPECS:
         from ..device_sim.endpoints import in_process
         from ..device_sim.printer import Printer
+        if live is not None and printer_class is None:
+            from .livemedia import live_printer_class
+            printer_class = live_printer_class()
         printer = (printer_class or Printer)(machine_profile or profile, faults,
                                              media_path=media_path, event_log=event_log,
                                              **emulator_options)
+        if live is not None:
+            printer.live = live
         port, data = in_process(printer)
         if wrap is not None:
             port, data = wrap(port, data, printer)

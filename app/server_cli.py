@@ -174,6 +174,10 @@ class Client:
         return self.request("GET", f"/v1/jobs/{job_id}/preview.png" + (f"?px={px}" if px else ""),
                             binary=True)
 
+    def media_png(self, printer: str) -> bytes:
+        """An emulated printer's media as it lands (the job printing or the last one)."""
+        return self.request("GET", f"/v1/printers/{printer}/media.png", binary=True)
+
     def printers(self) -> list[dict]:
         return self.request("GET", "/v1/printers")["printers"]
 

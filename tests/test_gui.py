@@ -193,6 +193,10 @@ def test_gui_jobs_print_bit_exact_and_history_shows_them(qtbot, win, server, tmp
     assert np.array_equal(media_of(server, ids[0]), pa)
     assert np.array_equal(media_of(server, ids[1]), pb)
     qtbot.waitUntil(lambda: {"a.tif", "b.tif"} <= set(names_in(win.history_view)), timeout=20_000)
+    # the emulated printer's media, as it landed, on its card
+    card = win.printers_panel.cards["main"]
+    qtbot.waitUntil(lambda: card.media.pixmap() is not None and not card.media.pixmap().isNull(),
+                    timeout=20_000)
     win.tabs.setCurrentIndex(1)
     win.history_view.select_ids([ids[0]])
     win._show_selection()

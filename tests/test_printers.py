@@ -153,3 +153,27 @@ def test_live_state_is_pushed_as_server_sent_events(two):
     seen = [any(j["id"] == job_id for j in v) for k, v in events if k == "jobs"]
     assert True in seen and seen[-1] is False                     # queued, then finished
     assert len(events) < 200                                      # changes, not a stream of copies
+
+
+def test_an_emulated_printers_media_is_live_at_its_physical_aspect(two):
+    """GET /v1/printers/NAME/media.png (docs/server.md, "Live media"): the media as it landed,
+    area-averaged (its mean ink equals the media's), at the true physical aspect; the
+    printers' event data says which version it is, so clients fetch only on a change."""
+    import cv2
+    from wideprint.rip.planes import render_rgb
+    srv, client, tmp = two
+    with pytest.raises(ApiError) as e:
+        client.media_png("left")
+    assert e.value.status == 404
+    f, planes = _image(tmp, "live.tif", 7, rows=900)
+    job = client.submit(f, printer="left")["job"]["id"]
+    assert client.wait(job, 120)["state"] == "done"
+    info = {p["name"]: p for p in client.printers()}["left"]["media"]
+    assert info["job"] == job and info["version"] > 0
+    img = cv2.imdecode(np.frombuffer(client.media_png("left"), np.uint8), cv2.IMREAD_COLOR)
+    prof = srv.profiles["left"]
+    w_mm = planes.shape[1] * 25.4 / 300
+    h_mm = planes.shape[0] * prof.row_um / 1000
+    assert abs(img.shape[1] / img.shape[0] - w_mm / h_mm) < 0.02 * w_mm / h_mm
+    want = render_rgb(planes).astype(float).mean()
+    assert abs(img.astype(float).mean() - want) < 2.0

@@ -151,6 +151,7 @@ class MainWindow(QMainWindow):
         self.active: list[dict] = []
         self.history: list[dict] = []
         self._thumbs_asked: set = set()
+        self._media_pending: set[str] = set()
         self._shown_key = None
         self._ended_logged: set[int] = set()
         self.calibration = None
@@ -355,6 +356,26 @@ class MainWindow(QMainWindow):
                 self.move_menu.addAction(n or "any printer", lambda _n=n: self._move(_n))
         if printers and self.preview is not None:
             self._media_from(printers[0])
+        for p in printers:
+            self._want_media(p)
+
+    def _want_media(self, p: dict) -> None:
+        """An emulated printer's live media, fetched when it changed, one request at a time."""
+        card = self.printers_panel.cards.get(p["name"])
+        m = p.get("media")
+        if card is None or not m or m["version"] == card.media_version or \
+                p["name"] in self._media_pending:
+            return
+        self._media_pending.add(p["name"])
+        card.media_version = m["version"]
+
+        def done(png, _card=card, _name=p["name"]):
+            self._media_pending.discard(_name)
+            _card.show_media(png)
+
+        def failed(_msg, _name=p["name"]):
+            self._media_pending.discard(_name)
+        self.link.call(lambda c, _n=p["name"]: c.media_png(_n), done, failed)
 
     def _media_from(self, p: dict) -> None:
         from .config import cached_profile

@@ -56,6 +56,15 @@ class PrinterCard(QFrame):
         self.telemetry.setObjectName("printer_telemetry")
         self.telemetry.setStyleSheet("color: #333;")
         g.addWidget(self.telemetry, 2, 0, 1, 3)
+        # an emulated printer's media as it lands (GET /v1/printers/NAME/media.png)
+        self.media = QLabel()
+        self.media.setObjectName("printer_media")
+        self.media.setFixedSize(150, 84)
+        self.media.setAlignment(Qt.AlignCenter)
+        self.media.setStyleSheet("background: #8a8d93; border: 1px solid #777;")
+        self.media.setToolTip("the media as it lands (emulated printer)")
+        g.addWidget(self.media, 0, 3, 5, 1)
+        self.media_version = None
         self.fault = _fixed_lines(QLabel(""), 2)
         self.fault.setObjectName("printer_fault")
         self.fault.setStyleSheet("color: #c62828;")
@@ -84,6 +93,14 @@ class PrinterCard(QFrame):
         g.addLayout(row, 4, 0, 1, 3)
         g.setColumnStretch(1, 1)
         self.info: dict = {}
+
+    def show_media(self, png: bytes) -> None:
+        from PySide6.QtGui import QImage, QPixmap
+        img = QImage.fromData(png, "PNG")
+        if not img.isNull():
+            self.media.setPixmap(QPixmap.fromImage(img).scaled(
+                self.media.width() - 2, self.media.height() - 2, Qt.KeepAspectRatio,
+                Qt.SmoothTransformation))
 
     def _pause_clicked(self) -> None:
         self.action.emit(self.name, "resume" if self.info.get("paused") else "pause", None)

@@ -485,6 +485,15 @@ class ApiHandler(BaseHTTPRequestHandler):
             if method == "POST" and route == ["estop"]:
                 self._query(url.query, ())
                 return self._json(200, {"stopped": self.srv.estop()})
+            if len(route) == 3 and route[:1] == ["printers"] and route[2] == "media.png" \
+                    and method == "GET":
+                self._query(url.query, ())
+                live = self.srv.printer_worker(route[1]).live
+                png = live.png() if live is not None else None
+                if png is None:
+                    raise Invalid(f"printer {route[1][:40]}: no live media (an emulated printer "
+                                  f"shows it once it has printed)", 404)
+                return self._send(200, png, "image/png")
             if len(route) == 3 and route[0] == "printers" and method == "POST":
                 self._query(url.query, ())
                 name, what = route[1], route[2]

@@ -444,7 +444,10 @@ class PrintServer:
                 cur["telemetry"] = dict(carriage_counts=t.carriage_counts, paper_steps=t.paper_steps,
                                         fires_done=t.fires_done, head_temps_c=list(t.head_temps_c),
                                         fifo_words=list(t.fifo_words), fault=t.fault, retries=t.retries)
+            live = w.live
             out.append(dict(name=name, device=w.printer.device, profile=w.profile.path,
+                            media=None if live is None or live.job is None else
+                            dict(job=live.job, version=live.version),
                             state=w.printer_state, error=w.printer_error, fault=w.fault or None,
                             paused=w.paused, reason=w.pause_reason, current=cur))
         return out

@@ -309,26 +309,41 @@ class HotFolders(threading.Thread):
         for cand in unique_names(base):
             if not (self._exists(dst_fd, cand) or self._exists(dst_fd, cand + REASON)):
                 break
-        os.rename(name, cand, src_dir_fd=src_fd, dst_dir_fd=dst_fd)
-        if reason is not None:               # written aside, renamed: never seen half written
-            tmp = f".{uuid.uuid4().hex}.reason.tmp"
-            try:
-                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
-                             | os.O_CLOEXEC, 0o644, dir_fd=dst_fd)
+        # the reason first, then the file: whoever sees the file in failed/ sees why
+        wrote = reason is not None and self._write_reason(dst_fd, cand, reason)
+        try:
+            os.rename(name, cand, src_dir_fd=src_fd, dst_dir_fd=dst_fd)
+        except OSError:
+            if wrote:
                 try:
-                    with os.fdopen(fd, "w", encoding="utf-8", errors="replace") as f:
-                        f.write(reason.rstrip() + "\n")
-                    os.rename(tmp, cand + REASON, src_dir_fd=dst_fd, dst_dir_fd=dst_fd)
-                except BaseException:
-                    try:
-                        os.unlink(tmp, dir_fd=dst_fd)
-                    except OSError:
-                        pass
-                    raise
-            except OSError as exc:
-                log.warning("hot folder: cannot write the reason for %s: %s", shown(cand),
-                            exc.strerror or exc)
+                    os.unlink(cand + REASON, dir_fd=dst_fd)
+                except OSError:
+                    pass
+            raise
         return cand
+
+    @staticmethod
+    def _write_reason(dst_fd: int, cand: str, reason: str) -> bool:
+        """DEST.reason.txt, written aside and renamed: never seen half written."""
+        tmp = f".{uuid.uuid4().hex}.reason.tmp"
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+                         | os.O_CLOEXEC, 0o644, dir_fd=dst_fd)
+            try:
+                with os.fdopen(fd, "w", encoding="utf-8", errors="replace") as f:
+                    f.write(reason.rstrip() + "\n")
+                os.rename(tmp, cand + REASON, src_dir_fd=dst_fd, dst_dir_fd=dst_fd)
+            except BaseException:
+                try:
+                    os.unlink(tmp, dir_fd=dst_fd)
+                except OSError:
+                    pass
+                raise
+        except OSError as exc:
+            log.warning("hot folder: cannot write the reason for %s: %s", shown(cand),
+                        exc.strerror or exc)
+            return False
+        return True
 
     @staticmethod
     def _exists(dir_fd: int, name: str) -> bool:

@@ -51,6 +51,7 @@ class Worker(threading.Thread):
         self._cancel: set[int] = set()
         self._backoff = server.config.reconnect_backoff[0]
         self._tests: list[dict] = []       # test prints asked for, run between jobs
+        self.live = None                   # an emulated printer's media as it lands (LiveMedia)
         self._test_ids = 0
         self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
@@ -246,9 +247,13 @@ class Worker(threading.Thread):
                                                    f"testprint-{job - TEST_PRINT_BASE}.tif"))
                           ) if media else None
             from ..devices import is_emulator_spec
-            inject = self.srv.config.inject if is_emulator_spec(self.printer.device) else None
+            emulated = is_emulator_spec(self.printer.device)
+            inject = self.srv.config.inject if emulated else None
+            if emulated and self.live is None:
+                from ..livemedia import LiveMedia
+                self.live = LiveMedia()
             self.dev = open_device(self.printer.device, self.profile, inject=inject,
-                                   media_path=media_path)
+                                   media_path=media_path, live=self.live if emulated else None)
         return self.dev
 
     def _drop_device(self) -> None:
