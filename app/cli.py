@@ -162,7 +162,7 @@ def cmd_rip(args) -> int:
         job = RipJob(args.file, settings, profile)
         # a temporary name, renamed when complete: a failed rip leaves no partial file
         with output_file(args.output) as tmp:
-            dots = job.write_planes(tmp)
+            dots = job.write_planes(tmp, args.planes_format)
     except (ImageError, ValueError, OSError) as exc:
         print(f"wideprint rip: {shown(exc)}", file=sys.stderr)
         return EXIT_JOB_FAILED
@@ -585,6 +585,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("rip", help="write the halftone planes the RIP intends")
     p.add_argument("file", metavar="FILE")
     p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
+    p.add_argument("--planes-format", choices=("8bit", "packed"), default="8bit",
+                   help="8bit: one byte per dot and ink, read by any TIFF reader (default); "
+                   "packed: one bit per dot and ink, 8x less to compress, read by tifffile, "
+                   "libtiff and wideprint but not PIL or libvips (docs/formats.md)")
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
 

@@ -106,15 +106,25 @@ class PrintableJob:
             yield from planner.feed_packed(bits)
         yield from planner.finish()
 
-    def write_planes(self, out: str | Path) -> np.ndarray:
-        """The halftone the RIP intends, as a planes TIFF; returns dots per colour."""
-        dots = np.zeros(4, np.int64)
+    def packed_native(self) -> bool:
+        """Whether `packed_bands()` is the cheaper way to this job's halftone (it is made as
+        bits, not dots)."""
+        return False
+
+    def write_planes(self, out: str | Path, planes_format: str = "8bit") -> np.ndarray:
+        """The halftone the RIP intends, as a planes TIFF (docs/formats.md; `planes_format`
+        "8bit" or "packed"); returns dots per colour.  Deflating runs on worker threads
+        while this thread makes the next bands."""
         with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
-                          description=f"wideprint planes of {Path(self.path).name}") as w:
-            for band in self.halftone_bands():
-                dots += band.reshape(-1, 4).sum(axis=0, dtype=np.int64)
-                w.write(band)
-        return dots
+                          description=f"wideprint planes of {Path(self.path).name}",
+                          planes_format=planes_format) as w:
+            if self.packed_native():
+                for bits in self.packed_bands():
+                    w.write_bits(bits)
+            else:
+                for band in self.halftone_bands():
+                    w.write(band)
+        return w.dots
 
     def close(self) -> None:
         pass
@@ -172,6 +182,9 @@ class RipJob(PrintableJob):
         separated = (sep.convert(band) for band in self.source.bands(self.settings.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
+
+    def packed_native(self) -> bool:
+        return self.settings.dither in ORDERED or getattr(self.source, "prescreened", False)
 
     def packed_bands(self) -> Iterator[np.ndarray]:
         """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
