@@ -25,6 +25,9 @@ from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the se
 from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
 
 
+BAND_PIXELS = 1 << 20     # pixels per band, at most (RipJob.band_rows)
+
+
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:
     """Run a generator in a background thread, `depth` items ahead, so the RIP works on
     the next strokes while the printer prints this one.  Exceptions arrive in order."""
@@ -146,6 +149,13 @@ class RipJob(PrintableJob):
         self.width, self.height = self.source.width, self.source.height
 
     @property
+    def band_rows(self) -> int:
+        """Rows per band: the setting's (64), fewer on wide images so that a band stays
+        about BAND_PIXELS (a 40,000 px wide job's bands are 26 rows: every stage holds a
+        band or two of it, bits identical for any banding)."""
+        return max(1, min(self.settings.band_rows, max(16, BAND_PIXELS // max(1, self.width))))
+
+    @property
     def ink_limit(self) -> float | None:
         """--ink-limit if given; else the profile's limit for separations we make (RGB,
         grey, and documents, whose RGB Ghostscript separates with the RIP's profiles);
@@ -169,7 +179,7 @@ class RipJob(PrintableJob):
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
-            yield from self.source.bands(self.settings.band_rows)
+            yield from self.source.bands(self.band_rows)
             return
         if self.settings.dither in ORDERED:
             for bits in self.packed_bands():
@@ -179,7 +189,7 @@ class RipJob(PrintableJob):
         ht = Halftoner(self.settings.dither, self.width, channels=4)
         # two stages on two cores: loading and separating the next band overlaps the
         # halftoning and stroke packing of this one
-        separated = (sep.convert(band) for band in self.source.bands(self.settings.band_rows))
+        separated = (sep.convert(band) for band in self.source.bands(self.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
 
@@ -192,7 +202,7 @@ class RipJob(PrintableJob):
         next bands (on both cores) overlaps the stroke packing of this one."""
         s = self.settings
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
-            yield from prefetch(prescreened_packed(self.source, s.band_rows), depth=1)
+            yield from prefetch(prescreened_packed(self.source, self.band_rows), depth=1)
             return
         if s.dither not in ORDERED:
             yield from super().packed_bands()
@@ -200,7 +210,7 @@ class RipJob(PrintableJob):
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
         # three stages: libvips reads band k+2 while both cores screen band k+1 and
         # the caller packs the strokes of band k
-        loaded = prefetch(self.source.bands(s.band_rows), depth=1)
+        loaded = prefetch(self.source.bands(self.band_rows), depth=1)
         yield from prefetch((screen.process(band) for band in loaded), depth=1)
 
     def close(self) -> None:

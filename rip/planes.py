@@ -34,6 +34,7 @@ FORMATS = ("8bit", "packed")
 DEFLATE_LEVEL = 1          # level 6 gives files ~25 % smaller at 3-5x the CPU time
 _ABORT = object()
 _POPCOUNT = np.array([bin(v).count("1") for v in range(256)], np.uint8)
+_NIBBLE_MASKS = (0x88, 0x44, 0x22, 0x11)      # C, M, Y, K of the two dots in a packed byte
 
 
 def _spread_table() -> np.ndarray:
@@ -76,12 +77,6 @@ def _ascii(text: str) -> str:
         else:
             out.append(ch.encode("ascii", "backslashreplace").decode())
     return "".join(out)
-
-
-def bits_to_dots(bits: np.ndarray, width: int) -> np.ndarray:
-    """The RIP's packed bands (h, 4, ceil(W / 8)), x = 0 in bit 7 -> dots (h, W, 4) uint8 0/1."""
-    dots = np.unpackbits(bits, axis=2, count=width)          # (h, 4, W)
-    return np.ascontiguousarray(dots.transpose(0, 2, 1))
 
 
 def _bits_to_nibbles(bits: np.ndarray, width: int) -> np.ndarray:
@@ -155,30 +150,33 @@ class PlanesWriter:
 
     # -- encoding (worker threads) --------------------------------------------------------
     def _encode(self, kind: str, band: np.ndarray) -> tuple[list[bytes], np.ndarray]:
+        """One band of the file, deflated: kind "nibbles" (the packed encoding's rows),
+        "bits" (the RIP's packed bands) or "dots" (8-bit values, some above 1)."""
         n = band.shape[0]
         if kind == "bits":
             dots = _POPCOUNT[band].sum(axis=(0, 2), dtype=np.int64)
+            if self.packed:
+                band, kind = _bits_to_nibbles(band, self.width), "nibbles"
+        elif kind == "nibbles":
+            dots = np.array([_POPCOUNT[band & m].sum(dtype=np.int64) for m in _NIBBLE_MASKS])
         else:
             dots = band.reshape(-1, 4).sum(axis=0, dtype=np.int64)
         if self.packed:
-            if kind == "bits":
-                rows = _bits_to_nibbles(band, self.width)
-            else:
-                if band.size and band.max() > 1:
-                    raise ValueError("the packed planes format holds 0 or 1 drop per dot, "
-                                     f"not {int(band.max())}")
-                rows = np.packbits(band.reshape(n, -1), axis=1)
-            return [self._deflate(rows)], dots
+            return [self._deflate(band)], dots
         if kind == "bits":
-            band = bits_to_dots(band, self.width)
+            band, kind = _bits_to_nibbles(band, self.width), "nibbles"
         th, tw = TILE
         tile = np.zeros((th, tw, 4), np.uint8)
         out = []
-        for x in range(0, self.width, tw):
+        for x in range(0, self.width, tw):       # a tile at a time: memory is a tile
             ww = min(tw, self.width - x)
             if n < th or ww < tw:
                 tile[:] = 0
-            tile[:n, :ww] = band[:, x:x + ww]
+            if kind == "nibbles":                 # tiles are 1024 wide: x // 2 is exact
+                part = band[:, x // 2:(x + ww + 1) // 2]
+                tile[:n, :ww] = np.unpackbits(part, axis=1, count=ww * 4).reshape(n, ww, 4)
+            else:
+                tile[:n, :ww] = band[:, x:x + ww]
             out.append(self._deflate(tile))
         return out, dots
 
@@ -216,11 +214,19 @@ class PlanesWriter:
     def _flush_band(self) -> None:
         allrows = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
         n = min(self.rows_per_segment, allrows.shape[0])
-        band = np.ascontiguousarray(allrows[:n])
+        band, kind = np.ascontiguousarray(allrows[:n]), self._kind
         rest = allrows[n:]
         self._pending = [rest] if rest.shape[0] else []
         self._pending_rows = rest.shape[0]
-        future = self._pool.submit(self._encode, self._kind, band)
+        if kind == "dots":
+            # 0/1 dots travel to the workers as the packed encoding's rows, 1/8 of the bytes
+            # (np.packbits is ~10x faster than deflate): the queue holds a few of them
+            top = int(band.max()) if band.size else 0
+            if top <= 1:
+                band, kind = np.packbits(band.reshape(n, -1), axis=1), "nibbles"
+            elif self.packed:
+                raise ValueError(f"the packed planes format holds 0 or 1 drop per dot, not {top}")
+        future = self._pool.submit(self._encode, kind, band)
         while True:                 # never block forever on a writer that has failed
             if self._error:
                 future.cancel()
