@@ -21,6 +21,10 @@ whose peak RSS is read from os.wait4's rusage):
 Peers run whole processes (their wall time includes their own start-up; Ghostscript's and
 ImageMagick's are well under 0.1 s); they use the threads they use by default, so CPU
 seconds are printed beside wall seconds.
+Then the whole commands users run, in the same run: `wideprint rip IMG -o PLANES.tif` per method
+and planes encoding (a fresh process each: start-up, reading, RIP, deflating, writing),
+`wideprint --help` and a 100 x 100 rip, with their ratios against Ghostscript's whole commands
+(issue 17); --wide adds peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
 --big also rips 40,000 x 20,000 and 40,000 x 60,000 RGB TIFFs (deflate strips, written by a
 generator that never holds the image) with bluenoise, to show that peak RSS does not grow
 with the image length.  No assertions: a measurement only.
