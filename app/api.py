@@ -72,8 +72,8 @@ def rip(file: str | Path, settings: Any = None, *, profile=None, out: str | Path
     with tempfile.TemporaryDirectory(prefix="wideprint-rip-") as d:
         target = Path(out) if out else Path(d) / "planes.tif"
         job = RipJob(str(file), rs, profile)
-        try:
-            job.write_planes(target)
+        try:      # read back here: the compact encoding unless the caller keeps the file
+            job.write_planes(target, "8bit" if out else "packed")
         finally:
             job.close()
         return read_planes(target)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import logging
 import signal
 import sys
 import time
@@ -178,7 +177,7 @@ def cmd_rip(args) -> int:
         job = RipJob(args.file, settings, profile)
         # a temporary name, renamed when complete: a failed rip leaves no partial file
         with output_file(args.output) as tmp:
-            dots = job.write_planes(tmp)
+            dots = job.write_planes(tmp, args.planes_format)
     except (ImageError, ValueError, OSError) as exc:
         print(f"wideprint rip: {shown(exc)}", file=sys.stderr)
         return EXIT_JOB_FAILED
@@ -650,6 +649,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("rip", help="write the halftone planes the RIP intends")
     p.add_argument("file", metavar="FILE")
     p.add_argument("-o", "--output", required=True, metavar="PLANES.tif")
+    p.add_argument("--planes-format", choices=("8bit", "packed"), default="8bit",
+                   help="8bit: one byte per dot and ink, read by any TIFF reader (default); "
+                   "packed: one bit per dot and ink, 8x less to compress, read by tifffile, "
+                   "libtiff and wideprint but not PIL or libvips (docs/formats.md)")
     _rip_options(p)
     p.set_defaults(func=cmd_rip)
 
@@ -732,6 +735,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    import logging                  # here: `--help` and usage errors never need it
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     # libvips reports decoding trouble as warnings too; our ImageError says it better

@@ -1,5 +1,7 @@
 """Compare two planes/media TIFFs dot for dot (`wideprint compare A B`, also
-`python -m wideprint.app.compare`).  Exit 0 when equal."""
+`python -m wideprint.app.compare`).  Exit 0 when equal.  Either file may use either
+encoding (8-bit or packed, docs/formats.md); both are read band by band, so memory is a
+band of each, whatever the print's length."""
 
 from __future__ import annotations
 
@@ -7,25 +9,61 @@ import sys
 
 import numpy as np
 
-from ..rip.planes import read_planes
+from ..rip.planes import iter_planes
 
 COLORS = "CMYK"
 
 
+def _size(path: str) -> tuple[int, int]:
+    import tifffile
+    with tifffile.TiffFile(path) as tf:
+        shape = tf.pages[0].shape
+    if len(shape) != 3 or shape[2] != 4:
+        raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {shape})")
+    return shape[0], shape[1]
+
+
+def _aligned(a_path: str, b_path: str):
+    """(first row, a rows, b rows): the two files cut into the same bands."""
+    ia, ib = iter_planes(a_path), iter_planes(b_path)
+    a = b = np.zeros((0, 0, 4), np.uint8)
+    y = 0
+    while True:
+        if not len(a):
+            a = next(ia, None)
+        if not len(b):
+            b = next(ib, None)
+        if a is None or b is None:
+            return
+        n = min(len(a), len(b))
+        yield y, a[:n], b[:n]
+        y += n
+        a, b = a[n:], b[n:]
+
+
 def compare(a_path: str, b_path: str) -> tuple[bool, str]:
-    a, b = read_planes(a_path), read_planes(b_path)
-    if a.shape != b.shape:
-        return False, f"sizes differ: {a_path} {a.shape[1]}x{a.shape[0]}, {b_path} {b.shape[1]}x{b.shape[0]}"
-    diff = a != b
-    n = int(diff.sum())
+    (ah, aw), (bh, bw) = _size(a_path), _size(b_path)
+    if (ah, aw) != (bh, bw):
+        return False, f"sizes differ: {a_path} {aw}x{ah}, {b_path} {bw}x{bh}"
+    drops = np.zeros(4, np.int64)
+    n, first, rows, doubled = 0, None, [None, None], 0
+    for y, a, b in _aligned(a_path, b_path):
+        drops += a.reshape(-1, 4).sum(axis=0, dtype=np.int64)
+        doubled += int((a > 1).sum() + (b > 1).sum())
+        diff = a != b
+        k = int(np.count_nonzero(diff))
+        if k:
+            r, c, ch = np.nonzero(diff)
+            if first is None:
+                first = (y + r[0], c[0], ch[0])
+                rows[0] = y + int(r.min())
+            rows[1] = y + int(r.max())
+            n += k
     if n == 0:
-        drops = a.reshape(-1, 4).sum(axis=0, dtype=np.int64)
-        return True, (f"identical: {a.shape[1]} x {a.shape[0]} dots, drops "
+        return True, (f"identical: {aw} x {ah} dots, drops "
                       + " ".join(f"{c} {d}" for c, d in zip(COLORS, drops)))
-    r, c, ch = np.nonzero(diff)
-    doubled = int((a > 1).sum() + (b > 1).sum())
-    return False, (f"{n} dots differ (first at row {r[0]}, column {c[0]}, {COLORS[ch[0]]}); "
-                   f"rows {r.min()}..{r.max()}; doubled dots {doubled}")
+    return False, (f"{n} dots differ (first at row {first[0]}, column {first[1]}, "
+                   f"{COLORS[first[2]]}); rows {rows[0]}..{rows[1]}; doubled dots {doubled}")
 
 
 def main(argv=None) -> int:

@@ -21,6 +21,10 @@ whose peak RSS is read from os.wait4's rusage):
 Peers run whole processes (their wall time includes their own start-up; Ghostscript's and
 ImageMagick's are well under 0.1 s); they use the threads they use by default, so CPU
 seconds are printed beside wall seconds.
+Then the whole commands users run, in the same run: `wideprint rip IMG -o PLANES.tif` per method
+and planes encoding (a fresh process each: start-up, reading, RIP, deflating, writing),
+`wideprint --help` and a 100 x 100 rip, with their ratios against Ghostscript's whole commands
+(issue 17); --wide adds peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
 --big also rips 40,000 x 20,000 and 40,000 x 60,000 RGB TIFFs (deflate strips, written by a
 generator that never holds the image) with bluenoise, to show that peak RSS does not grow
 with the image length.  No assertions: a measurement only.
@@ -29,6 +33,7 @@ with the image length.  No assertions: a measurement only.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -53,7 +58,15 @@ TARGET_FS_VS_GS = 3.0       # ... and >= 3x Ghostscript tiffscaled4
 TARGET_ORDERED_MPX = 100.0  # ordered / blue noise, Mpx/s
 TARGET_RSS_MB = 400.0       # peak RSS for a 40,000 px wide image, whatever its length
 
+TARGET_CLI_FS_VS_GS = 4.0         # issue 17: `wideprint rip -o` (fs) >= 4x gs tiffscaled4, whole commands
+TARGET_CLI_ORDERED_VS_GS = 10.0   # ... and an ordered method >= 10x gs bitcmyk
+TARGET_CLI_RSS_MB = 250.0         # peak RSS of `rip` and `print` at 40,000 px wide
+TARGET_HELP_S = 0.15              # `wideprint --help`
+
 WIDEPRINT_METHODS = ("fs", "bayer", "bluenoise", "vced")
+# `wideprint rip IMG -o PLANES.tif` as a whole command: (dither, planes format)
+CLI_RUNS = (("fs", "8bit"), ("fs", "packed"), ("vced", "packed"), ("bayer", "8bit"),
+            ("bayer", "packed"), ("bluenoise", "8bit"), ("bluenoise", "packed"))
 TARGET_VCED_VS_FS = 0.70    # issue 18: the default error diffusion at >= 70 % of fs's throughput
 PAGE_ROWS = 4000            # the test image repeats vertically every PAGE_ROWS rows (a banner
                             # of step-and-repeat pages) so that big images are cheap to write
@@ -313,6 +326,102 @@ def run_wideprint(method: str, path: str, warm: str) -> tuple[Run, dict]:
     return r, info
 
 
+def wideprint_cmd(*args: str) -> list[str]:
+    """The `wideprint` command line (as the console script runs it: a fresh interpreter)."""
+    return [sys.executable, "-m", "wideprint.app.cli", *args]
+
+
+def cli_env() -> dict:
+    """The environment for `wideprint` commands: this checkout's package importable, and
+    byte-code written (a user's installed package has its .pyc files; a checkout run with
+    PYTHONDONTWRITEBYTECODE would compile every module on every start)."""
+    import wideprint
+    parent = os.path.dirname(os.path.dirname(os.path.abspath(wideprint.__file__)))
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env["PYTHONPATH"] = os.pathsep.join([parent] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
+def best_run(cmd, repeat: int, **kw) -> tuple[Run, list[float]]:
+    runs = [run_measured(cmd, **kw) for _ in range(repeat)]
+    good = [r for r in runs if r.ok]
+    return (min(good, key=lambda r: r.wall) if good else runs[0]), [r.wall for r in good]
+
+
+def whole_commands(d: str, tif: str, w: int, h: int, repeat: int) -> dict:
+    """`wideprint rip IMG -o PLANES.tif` for CLI_RUNS, start-up figures: {key: (Mpx/s, Run)}."""
+    env = cli_env()
+    mpx = w * h / 1e6
+    out = os.path.join(d, "planes.tif")
+    small = os.path.join(d, "small.tif")
+    write_tiff(small, TestImage(100, 100))
+    for m in sorted({m for m, _ in CLI_RUNS}):        # numba's cache filled before any clock
+        run_measured(wideprint_cmd("rip", small, "-o", out, "--dither", m), env=env)
+    res = {}
+    print("whole commands, as users run them: `wideprint rip IMG -o PLANES.tif --size pixels "
+          "--dither M --planes-format F` (start-up, reading, RIP, writing; a fresh process each)")
+    print(f"{'tool':12s} {'method':22s} {'wall s':>8s} {'cpu s':>8s} {'Mpx/s':>9s} {'RSS MB':>9s}  note")
+    for method, fmt in CLI_RUNS:
+        cmd = wideprint_cmd("rip", tif, "-o", out, "--size", "pixels", "--dither", method,
+                            "--planes-format", fmt)
+        r, walls = best_run(cmd, repeat, env=env)
+        size = os.path.getsize(out) / 1e6 if r.ok and os.path.exists(out) else 0
+        note = f"best of {len(walls)} ({', '.join(f'{t:.2f}' for t in walls)} s); file {size:.1f} MB"
+        print(fmt_row("wideprint", f"rip -o {method} {fmt}", mpx, r, note), flush=True)
+        if r.ok:
+            res[("cli", method, fmt)] = (mpx / r.wall, r)
+    with contextlib.suppress(OSError):
+        os.unlink(out)
+    r, walls = best_run(wideprint_cmd("--help"), max(5, repeat), env=env)
+    print(fmt_row("wideprint", "--help", 0, r, f"best of {len(walls)}").replace(f"{0:9.1f}", f"{'-':>9s}"))
+    res[("cli", "--help")] = (0, r)
+    r, walls = best_run(wideprint_cmd("rip", small, "-o", out, "--dither", "fs"), repeat, env=env)
+    print(fmt_row("wideprint", "rip -o 100 x 100 (fs)", 0, r,
+                  "start-up: imports, numba's cache, a tiny job").replace(f"{0:9.1f}", f"{'-':>9s}"))
+    res[("cli", "small")] = (0, r)
+    with contextlib.suppress(OSError):
+        os.unlink(out)
+    return res
+
+
+def wide_memory(d: str, repeat: int = 1) -> dict:
+    """Peak RSS of `wideprint rip` on a 40,000 px wide RGB image and `wideprint print`
+    (in-process emulator) on the widest image the default paper takes (37,600 px at 300 dpi:
+    3,200 mm less the 5 mm margins), every kind of method."""
+    env = cli_env()
+    h = 1500
+    res = {}
+    print(f"peak RSS of whole commands on wide images ({h} rows, RGB, uncompressed TIFF, --size pixels)")
+    print(f"{'command':44s} {'wall s':>8s} {'cpu s':>8s} {'RSS MB':>8s}")
+    for w, cmds in ((40000, "rip"), (37600, "print")):
+        tif = os.path.join(d, f"wide{w}.tif")
+        write_tiff(tif, TestImage(w, h))
+        out = os.path.join(d, "wide_out.tif")
+        if cmds == "rip":
+            runs = [(f"rip -o {m} {f}, {w} px", ["rip", tif, "-o", out, "--dither", m, "--planes-format", f])
+                    for m, f in (("fs", "8bit"), ("fs", "packed"), ("vced", "8bit"), ("bluenoise", "8bit"))]
+        else:
+            runs = [(f"print --device emulator {m}, {w} px", ["print", tif, "--device", "emulator",
+                                                             "--dither", m, "--passes", "1"])
+                    for m in ("fs", "vced", "bluenoise")]
+        for name, args in runs:
+            r, _ = best_run(wideprint_cmd(*args, "--size", "pixels"), repeat, env=env)
+            if not r.ok:
+                print(f"{name:44s} FAILED: {(r.err or r.out).strip()[-300:]}")
+                continue
+            print(f"{name:44s} {r.wall:8.2f} {r.cpu:8.2f} {r.rss_mb:8.0f}", flush=True)
+            res[name] = r.rss_mb
+        for f in (tif, out):
+            with contextlib.suppress(OSError):
+                os.unlink(f)
+    if res:
+        worst = max(res.values())
+        print(f"largest peak RSS {worst:.0f} MB: target <= {TARGET_CLI_RSS_MB:.0f} MB: "
+              f"{verdict(worst <= TARGET_CLI_RSS_MB)}")
+    return res
+
+
 # ------------------------------------------------------------------------------------------
 # peers
 
@@ -516,8 +625,14 @@ def bench(args) -> None:
                     if f.startswith(("gs_out", "im_", "pbm_")):
                         os.unlink(os.path.join(d, f))
 
+        if args.only != "peers" and not args.no_cli:
+            print()
+            res.update(whole_commands(d, tif, w, h, args.repeat))
         print()
         print_ratios(res, w)
+        if args.wide and args.only != "peers":
+            print()
+            wide_memory(d)
         if args.big and args.only != "peers":
             print()
             big(d, warm if args.only != "peers" else None)
@@ -559,6 +674,16 @@ def print_ratios(res, w: int) -> None:
             line(f"wideprint {name} / gs bitcmyk", f"{v / gs_or:.2f}x", "-", None)
         if v and im_or:
             line(f"wideprint {name} / ImageMagick o8x8", f"{v / im_or:.2f}x", "-", None)
+    for (method, fmt) in CLI_RUNS:
+        v = rate(("cli", method, fmt))
+        peer, target = (gs_ed, TARGET_CLI_FS_VS_GS) if method in ("fs", "vced") else (gs_or, TARGET_CLI_ORDERED_VS_GS)
+        if v and peer:
+            line(f"rip -o {method} {fmt} / gs {'tiffscaled4' if peer is gs_ed else 'bitcmyk'} (whole)",
+                 f"{v / peer:.2f}x", f">= {target:.0f}x" if method != "vced" else "-",
+                 v / peer >= target if method != "vced" else None)
+    if ("cli", "--help") in res:
+        t = res[("cli", "--help")][1].wall
+        line("wideprint --help, s", f"{t:.3f}", f"<= {TARGET_HELP_S:.2f} s", t <= TARGET_HELP_S)
     rss = [res[("wideprint", m)][1].rss_mb for m in WIDEPRINT_METHODS if ("wideprint", m) in res]
     if rss:
         line(f"wideprint peak RSS at {w} px wide, MB", f"{max(rss):.0f}",
@@ -686,6 +811,11 @@ def main(argv=None) -> int:
     ap.add_argument("--big", action="store_true",
                     help="also rip 40000x20000 and 40000x60000 images (bluenoise) for peak RSS; minutes")
     ap.add_argument("--only", choices=("wideprint", "peers"))
+    ap.add_argument("--no-cli", action="store_true",
+                    help="skip the whole `wideprint rip -o` commands and the start-up figures")
+    ap.add_argument("--wide", action="store_true",
+                    help="also measure peak RSS of `rip` and `print` at 40,000 px wide (~2 min)")
+    ap.add_argument("--wide-only", action="store_true", help="only that")
     ap.add_argument("--no-netpbm", action="store_true", help="skip the (slow) netpbm pipelines")
     ap.add_argument("--repeat", type=int, default=3, help="wideprint runs per method, best taken")
     ap.add_argument("--peer-repeat", type=int, default=1, help="runs per peer, best taken")
@@ -697,6 +827,12 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.child:
         child(args.child[0], args.child[1], args.warm_file)
+    elif args.wide_only:
+        d = tempfile.mkdtemp(prefix="rip_bench_", dir="/tmp")
+        try:
+            wide_memory(d)
+        finally:
+            shutil.rmtree(d, ignore_errors=True)
     elif args.profile:
         profile(args.profile, args.width, args.height)
     else:

@@ -25,6 +25,9 @@ from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the se
 from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
 
 
+BAND_PIXELS = 1 << 20     # pixels per band, at most (RipJob.band_rows)
+
+
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:
     """Run a generator in a background thread, `depth` items ahead, so the RIP works on
     the next strokes while the printer prints this one.  Exceptions arrive in order."""
@@ -106,15 +109,25 @@ class PrintableJob:
             yield from planner.feed_packed(bits)
         yield from planner.finish()
 
-    def write_planes(self, out: str | Path) -> np.ndarray:
-        """The halftone the RIP intends, as a planes TIFF; returns dots per colour."""
-        dots = np.zeros(4, np.int64)
+    def packed_native(self) -> bool:
+        """Whether `packed_bands()` is the cheaper way to this job's halftone (it is made as
+        bits, not dots)."""
+        return False
+
+    def write_planes(self, out: str | Path, planes_format: str = "8bit") -> np.ndarray:
+        """The halftone the RIP intends, as a planes TIFF (docs/formats.md; `planes_format`
+        "8bit" or "packed"); returns dots per colour.  Deflating runs on worker threads
+        while this thread makes the next bands."""
         with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
-                          description=f"wideprint planes of {Path(self.path).name}") as w:
-            for band in self.halftone_bands():
-                dots += band.reshape(-1, 4).sum(axis=0, dtype=np.int64)
-                w.write(band)
-        return dots
+                          description=f"wideprint planes of {Path(self.path).name}",
+                          planes_format=planes_format) as w:
+            if self.packed_native():
+                for bits in self.packed_bands():
+                    w.write_bits(bits)
+            else:
+                for band in self.halftone_bands():
+                    w.write(band)
+        return w.dots
 
     def close(self) -> None:
         pass
@@ -147,6 +160,13 @@ class RipJob(PrintableJob):
         self.width, self.height = self.source.width, self.source.height
 
     @property
+    def band_rows(self) -> int:
+        """Rows per band: the setting's (64), fewer on wide images so that a band stays
+        about BAND_PIXELS (a 40,000 px wide job's bands are 26 rows: every stage holds a
+        band or two of it, bits identical for any banding)."""
+        return max(1, min(self.settings.band_rows, max(16, BAND_PIXELS // max(1, self.width))))
+
+    @property
     def ink_limit(self) -> float | None:
         """--ink-limit if given; else the profile's limit for separations we make (RGB,
         grey, and documents, whose RGB Ghostscript separates with the RIP's profiles);
@@ -175,7 +195,7 @@ class RipJob(PrintableJob):
             yield from self.layout.halftone_bands()
             return
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
-            yield from self.source.bands(self.settings.band_rows)
+            yield from self.source.bands(self.band_rows)
             return
         if self.settings.dither in ORDERED:
             for bits in self.packed_bands():
@@ -185,9 +205,12 @@ class RipJob(PrintableJob):
         ht = Halftoner(self.settings.dither, self.width, channels=4)
         # two stages on two cores: loading and separating the next band overlaps the
         # halftoning and stroke packing of this one
-        separated = (sep.convert(band) for band in self.source.bands(self.settings.band_rows))
+        separated = (sep.convert(band) for band in self.source.bands(self.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
+
+    def packed_native(self) -> bool:
+        return self.settings.dither in ORDERED or getattr(self.source, "prescreened", False)
 
     def packed_bands(self) -> Iterator[np.ndarray]:
         """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
@@ -198,7 +221,7 @@ class RipJob(PrintableJob):
             yield from self.layout.packed_bands()
             return
         if getattr(self.source, "prescreened", False):  # 1-bit RTL: the file's own dots
-            yield from prefetch(prescreened_packed(self.source, s.band_rows), depth=1)
+            yield from prefetch(prescreened_packed(self.source, self.band_rows), depth=1)
             return
         if s.dither not in ORDERED:
             yield from super().packed_bands()
@@ -206,7 +229,7 @@ class RipJob(PrintableJob):
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
         # three stages: libvips reads band k+2 while both cores screen band k+1 and
         # the caller packs the strokes of band k
-        loaded = prefetch(self.source.bands(s.band_rows), depth=1)
+        loaded = prefetch(self.source.bands(self.band_rows), depth=1)
         yield from prefetch((screen.process(band) for band in loaded), depth=1)
 
     def close(self) -> None:
