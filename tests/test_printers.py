@@ -177,3 +177,45 @@ def test_an_emulated_printers_media_is_live_at_its_physical_aspect(two):
     assert abs(img.shape[1] / img.shape[0] - w_mm / h_mm) < 0.02 * w_mm / h_mm
     want = render_rgb(planes).astype(float).mean()
     assert abs(img.astype(float).mean() - want) < 2.0
+
+
+def test_any_goes_to_a_printer_whose_paper_holds_the_job(tmp_path):
+    """A job for any printer goes to the first free printer whose paper holds it: a narrow
+    roll's printer leaves a wide job for the wide one, and still takes the narrow jobs."""
+    from wideprint.app.server import PrintServer, ServerConfig
+    from wideprint.app.server.config import PrinterConfig
+    from wideprint.rip.profile import DEFAULT_PROFILE
+    narrow = tmp_path / "narrow.toml"
+    narrow.write_text(DEFAULT_PROFILE.read_text().replace(
+        "default_width_mm = 3200.0", "default_width_mm = 100.0"))
+    cfg = ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "media", port=0,
+                       printers=[PrinterConfig("wide", "emulator"),
+                                 PrinterConfig("narrow", "emulator", str(narrow))])
+    srv = PrintServer(cfg)
+    srv.start()
+    client = Client(srv.state_dir)
+    try:
+        client.printer_action("wide", "pause")
+        wide, pw = _wide_image(tmp_path)
+        small, ps = _image(tmp_path, "small.tif", 2, rows=200)
+        jw = client.submit(wide)["job"]["id"]
+        js = client.submit(small)["job"]["id"]
+        done = client.wait(js, 60)
+        assert done["state"] == "done" and done["printed_on"] == "narrow"
+        time.sleep(1.0)                          # the narrow printer is free: it must not take it
+        assert client.job(jw)["state"] == "queued"
+        printers = {p["name"]: p for p in client.printers()}
+        assert printers["narrow"]["printable_mm"] < 100 < printers["wide"]["printable_mm"]
+        client.printer_action("wide", "resume")
+        done = client.wait(jw, 120)
+        assert done["state"] == "done" and done["printed_on"] == "wide"
+        assert np.array_equal(read_planes(tmp_path / "media" / f"job-{jw}.tif"), pw)
+    finally:
+        client.close()
+        srv.stop(timeout=5)
+
+
+def _wide_image(tmp_path):
+    """1,500 dots at 300 dpi: 127 mm, wider than the narrow roll's 90 mm printable."""
+    planes = random_planes(150, 1500, seed=5)
+    return write_cmyk_tiff(tmp_path / "wide.tif", planes), planes

@@ -76,6 +76,7 @@ class PrintServer:
         self.worker = next(iter(self.workers.values()))     # the first printer
         self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
         self.previews = Previews(self)
+        self._widths: dict = {}                 # job_width_mm's cache
         handler = type("Handler", (ApiHandler,), {"srv": self})
         if config.host not in ("127.0.0.1", "localhost", "::1"):
             log.warning("the API listens on %s, beyond this machine: anyone with the token "
@@ -435,6 +436,31 @@ class PrintServer:
         log.warning("emergency stop: %s", ", ".join(stopped) or "nothing was printing")
         return stopped
 
+    def job_width_mm(self, job: dict, profile) -> float | None:
+        """How wide a job prints (its placed image or layout, mm) with `profile`; cached
+        per job and settings; None when the file cannot tell (it fails on its own)."""
+        key = (job["id"], json.dumps(job["settings"], sort_keys=True), str(profile.path))
+        if key in self._widths:
+            return self._widths[key]
+        from ...rip.load import ImageError
+        from ...rip.pipeline import RipJob
+        from .validate import rip_settings
+        width = None
+        try:
+            settings = {k: v for k, v in job["settings"].items()       # colour: no width
+                        if k not in ("input_icc", "output_icc")}
+            rip = RipJob(job["spool_path"], rip_settings(settings), profile)
+            try:
+                width = rip.width * profile.k(rip.settings.dpi) / profile.counts_per_inch * 25.4
+            finally:
+                rip.close()
+        except (ImageError, ValueError, OSError, TypeError):
+            pass
+        if len(self._widths) > 1000:
+            self._widths.clear()
+        self._widths[key] = width
+        return width
+
     def printers(self) -> list[dict]:
         out = []
         for name, w in self.workers.items():
@@ -446,6 +472,7 @@ class PrintServer:
                                         fifo_words=list(t.fifo_words), fault=t.fault, retries=t.retries)
             live = w.live
             out.append(dict(name=name, device=w.printer.device, profile=w.profile.path,
+                            paper_mm=w.paper_mm, printable_mm=round(w.printable_mm(), 1),
                             media=None if live is None or live.job is None else
                             dict(job=live.job, version=live.version),
                             state=w.printer_state, error=w.printer_error, fault=w.fault or None,

@@ -251,6 +251,15 @@ class Spool:
 
     QUEUE_ORDER = "ORDER BY interrupted DESC, priority DESC, id ASC"
 
+    def next_jobs(self, printer: str, limit: int = 16) -> list[dict]:
+        """The first `limit` jobs `printer` may print, in the order next_job takes them (the
+        worker skips "any" jobs its paper cannot hold: docs/server.md, "Several printers")."""
+        rows = self.db.execute(
+            "SELECT * FROM jobs WHERE state='queued' AND (printer IS NULL OR printer=?) "
+            "AND (interrupted=0 OR printed_on IS NULL OR printed_on=?) "
+            f"{self.QUEUE_ORDER} LIMIT ?", (printer, printer, limit)).fetchall()
+        return [_job_dict(r) for r in rows]
+
     def next_job(self, printer: str | None = None) -> dict | None:
         """The job a printer's worker prints next: one that printer was interrupted in
         first (the paper is in the middle of it), then by priority, then in submission order,

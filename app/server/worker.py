@@ -52,6 +52,7 @@ class Worker(threading.Thread):
         self._backoff = server.config.reconnect_backoff[0]
         self._tests: list[dict] = []       # test prints asked for, run between jobs
         self.live = None                   # an emulated printer's media as it lands (LiveMedia)
+        self.paper_mm: float | None = None # the paper's width as last measured
         self._test_ids = 0
         self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
@@ -219,7 +220,7 @@ class Worker(threading.Thread):
             job = None
             if not self.paused:
                 try:
-                    job = self.spool.next_job(self.name_)
+                    job = self._next_job()
                 except Exception:  # noqa: BLE001 - a database hiccup must not end the worker
                     log.exception("reading the queue")
             if job is None:
@@ -238,6 +239,40 @@ class Worker(threading.Thread):
                 self.current, self.job = None, None
                 if self.printer_state == "printing":
                     self.printer_state = "idle"
+
+    def _next_job(self) -> dict | None:
+        """The next job for this printer: its own, or one for any printer whose width its
+        paper holds.  An "any" job too wide for this paper is left for a printer whose
+        paper is wide enough; when no printer's paper holds it, the first free printer
+        takes it and the job fails with its own reason (docs/server.md, "Several printers")."""
+        for job in self.spool.next_jobs(self.name_):
+            if job["printer"] is not None or job["interrupted"]:
+                return job
+            need = self.srv.job_width_mm(job, self.profile)
+            if need is None or self.fits(need):
+                return job
+            if not any(w.fits(need) for w in self.srv.workers.values() if w is not self):
+                return job
+        return None
+
+    def printable_mm(self) -> float:
+        """This printer's paper (measured at its last job, else its profile's sheet) less
+        the profile's side margins."""
+        paper = self.paper_mm if self.paper_mm is not None else self.profile.paper.default_width_mm
+        return paper - 2 * float(self.profile.paper.margin_mm)
+
+    def fits(self, width_mm: float) -> bool:
+        return width_mm <= self.printable_mm() + 1e-6
+
+    def _measure_paper(self) -> None:
+        """The paper's width, as the printer measured it (its edge sensors)."""
+        from ...driver.printer import Printer
+        try:
+            p = Printer(self.dev).paper()
+        except Exception:  # noqa: BLE001 - a reading for the queue's choice, never fatal
+            return
+        if p.present:
+            self.paper_mm = (p.right_counts - p.left_counts) / self.profile.counts_per_inch * 25.4
 
     def _device(self):
         if self.dev is None:
@@ -384,6 +419,7 @@ class Worker(threading.Thread):
                 rip.close()
             self.printer_state, self.printer_error = "printing", ""
             self._backoff = self.srv.config.reconnect_backoff[0]
+            self._measure_paper()
             self._account(job, copy, started, rep, "done", "", resumed)
             job = self.spool.copy_done(job_id)
         self._finish(job, "done", "")
