@@ -155,7 +155,12 @@ class PrinterCard(QFrame):
             self.job.setText("")
             self.progress.setValue(0)
             self.progress.setFormat("")
-            self.telemetry.setText("")
+            pm = p.get("printable_mm")
+            self.telemetry.setText("" if pm is None else
+                                   f"paper: {pm:,.0f} mm printable"
+                                   + ("" if p.get("paper_mm") is not None else " (profile's sheet)"))
+            self.telemetry.setToolTip("the paper's width less the side margins; measured by "
+                                      "the printer at its last job")
         if fault:
             advice = plain_message(fault)
             self.fault.setText(short_paths(fault) + (f" {advice}" if advice else ""))
