@@ -15,11 +15,14 @@ import json
 import math
 import sys
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..rip.profile import FINE_STEPS, Profile, ProfileError, load_profile, save_calibration
-from ..rip.testprints import Mark, ScanLayout, scan_layout
+
+if TYPE_CHECKING:      # the patterns import the RIP's kernels: not for `wideprint --help`
+    from ..rip.testprints import Mark, ScanLayout
 
 KINDS = {"nozzles": "nozzle-check", "bidir": "bidir-scan", "heads": "heads-scan",
          "feed": "feed-scan"}
@@ -361,6 +364,7 @@ CALIBRATIONS = {"nozzles": calibrate_nozzles, "bidir": calibrate_bidir,
 def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width_mm: float = 100.0,
               scan_dpi: float | None = None) -> Result:
     """Measure a scan of the `kind` pattern printed with `profile` at `dpi`, `width_mm`."""
+    from ..rip.testprints import scan_layout
     k = profile.k(dpi)
     width = int(round(width_mm / 25.4 * profile.counts_per_inch / k))
     layout = scan_layout(KINDS[kind], profile, width, dpi)
