@@ -693,6 +693,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .printer_cli import add_parser as add_printer_parser
     add_printer_parser(sub)       # printer status|home|park|feed|measure|clear-fault
 
+    from .calibrate import add_parser as add_calibrate_parser
+    add_calibrate_parser(sub)     # calibrate nozzles|bidir|heads|feed (docs/calibration.md)
+
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)
 

@@ -32,6 +32,7 @@ class Fpga:
                      P.REG_STROKE_LO: 0, P.REG_STROKE_HI: 0, P.REG_FIRE_START_LO: 0,
                      P.REG_FIRE_START_HI: 0, P.REG_FIRE_COUNT_LO: 0, P.REG_FIRE_COUNT_HI: 0,
                      P.REG_HEAD_MASK: (1 << n_heads) - 1}
+        self.clear_fire_delays()
         self.configured_mask = 0
         self.underrun_mask = 0
         self.firing = False
@@ -55,6 +56,17 @@ class Fpga:
         self.regs[P.REG_STROKE_LO] = P.NO_STROKE & 0xFFFF
         self.regs[P.REG_STROKE_HI] = P.NO_STROKE >> 16
         self.fired = 0
+
+    def clear_fire_delays(self) -> None:
+        """FIRE_DELAY_FWD/REV0..7 to 0 (at power-up and a new job's JOB_BEGIN)."""
+        for h in range(8):
+            self.regs[P.REG_FIRE_DELAY_FWD0 + h] = 0
+            self.regs[P.REG_FIRE_DELAY_REV0 + h] = 0
+
+    def fire_delay_s(self, head: int, forward: bool) -> float:
+        """Head h's fire delay after the trigger edge in this direction, seconds."""
+        base = P.REG_FIRE_DELAY_FWD0 if forward else P.REG_FIRE_DELAY_REV0
+        return self.regs[base + head] / P.FIRE_DELAY_HZ
 
     @property
     def fire_start(self) -> int:

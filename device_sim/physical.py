@@ -63,11 +63,12 @@ class JobGeometry:
         return self.head_dy_um[head] + self.nozzle_dy_um[head]
 
     def grid(self, head: int, x_counts: int, slots: np.ndarray, forward: bool,
-             paper_nm: float) -> tuple[np.ndarray, np.ndarray]:
+             paper_nm: float, delay_counts: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Bit-exact media cell of each nozzle's drops: (column offset from the trigger
         column, media row), per nozzle.  The cell holds the drop's static position
-        (docs/physical.md): col = c + floor((X - x0 + k/2 + dx) / k)."""
-        dx_counts = self.static_dx_um(head, forward) / self.count_um
+        (docs/physical.md): col = c + floor((X - x0 + k/2 + dx) / k); a fire delay moves
+        it by its nominal `delay_counts` (s V t, docs/calibration.md)."""
+        dx_counts = self.static_dx_um(head, forward) / self.count_um + delay_counts
         dcol = np.floor((x_counts - self.x0 + self.k / 2 + dx_counts) / self.k).astype(np.int64)
         dy_nm = self.static_dy_um(head) * 1000.0
         rows = np.rint((paper_nm + slots * self.row_nm + dy_nm) / self.row_nm).astype(np.int64) - self.y0
@@ -128,12 +129,13 @@ class PhysicalModel:
     # -- the drops ------------------------------------------------------------------------
     def land(self, geo: JobGeometry, head: int, columns: np.ndarray, words: np.ndarray,
              forward: bool, velocity: np.ndarray, line_speed: float,
-             paper_um: float) -> tuple[np.ndarray, np.ndarray]:
+             paper_um: float, delay_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Positions (x µm, y µm) in the image frame of every drop of one head's fires:
         `columns` the trigger columns, `words` (fires, 8) what the nozzles latched (dead
         nozzles already cleared), `velocity` the carriage's signed speed at each fire
         (counts/s), `line_speed` the line's commanded speed, `paper_um` the paper's travel
-        since JOB_BEGIN."""
+        since JOB_BEGIN, `delay_s` the head's fire delay (FIRE_DELAY registers): the strobes
+        come that much later, the carriage has moved v t further."""
         fire, z = np.nonzero(P.words_to_nozzles(words))
         if fire.size == 0:
             return np.zeros(0), np.zeros(0)
@@ -141,7 +143,7 @@ class PhysicalModel:
         s = 1.0 if forward else -1.0
         p = self.phase[z]
         q = p if forward else 2 - p
-        t_q = self.t_shift + q * self.t_gap
+        t_q = self.t_shift + q * self.t_gap + delay_s
         v = np.asarray(velocity, np.float64)[fire]
         dyn_counts = (v * (t_q + self.t_flight) - (p - 1) * self.v_design * self.t_gap
                       - s * line_speed * (self.t_shift + self.t_gap + self.t_flight))

@@ -480,6 +480,7 @@ class Printer:
         # number, same fire count) must not look like this job's (docs/protocol.md JOB_BEGIN)
         self.line_done = False
         self.fpga.clear_stroke()
+        self.fpga.clear_fire_delays()
         self._close_scan()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
                         y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
@@ -584,10 +585,15 @@ class Printer:
         # misdirected, the paper travels `feed-error` further.  The media holds each drop
         # in the cell of its static position.  The profile's calibration (bidir offset,
         # head x) is the RIP's business: a profile that matches the machine prints exactly.
+        # A fire delay (FIRE_DELAY registers, docs/calibration.md) lands the drops v t
+        # further along the travel: in the media by the line's nominal speed.
         paper_nm = self.paper_nm()
-        dcol, rows = self.geometry.grid(head, h.x_counts, self.physical.slots[head], forward, paper_nm)
+        delay = self.fpga.fire_delay_s(head, forward)
+        shift = (1.0 if forward else -1.0) * line_speed * delay          # counts
+        dcol, rows = self.geometry.grid(head, h.x_counts, self.physical.slots[head], forward,
+                                        paper_nm, shift)
         self.media.land_words(h.channel, words, columns, rows, dcol)
         if self.scanner is not None and velocity is not None:
             x, y = self.physical.land(self.geometry, head, columns, words, forward, velocity,
-                                      line_speed, paper_nm / 1000)
+                                      line_speed, paper_nm / 1000, delay)
             self.scanner.splat(h.channel, x, y)

@@ -12,6 +12,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from . import protocol as P
 from .device import Device
 from .link import DeviceError, LineTooNoisy, LinkError
@@ -250,6 +252,21 @@ class PrintJob:
                            f"{prof.max_fire_hz:.0f} Hz (limit {limit:.0f} mm/s)")
         return int(self.speed_mm_s / 25.4 * prof.counts_per_inch)
 
+    def _fire_delays(self) -> None:
+        """The calibration's fine shift per head and direction (docs/calibration.md) as
+        FIRE_DELAY ticks at this job's line speed; JOB_BEGIN cleared them, so a profile
+        without one writes nothing."""
+        prof = self.profile
+        _, fine_um = prof.fire_shift(self.rip.settings.dpi)
+        if not fine_um.any():
+            return
+        v_um_s = self.line_speed() * 25_400.0 / prof.counts_per_inch
+        ticks = np.minimum(np.rint(fine_um / v_um_s * P.FIRE_DELAY_HZ), 0xFFFF).astype(int)
+        for d, base in enumerate((P.REG_FIRE_DELAY_FWD0, P.REG_FIRE_DELAY_REV0)):
+            for h in range(len(prof.heads)):
+                if ticks[d, h]:
+                    self.dev.link.write_reg(base + h, int(ticks[d, h]))
+
     def _command(self, step):
         """A printer API call; a fault it meets (latched, or refusing the command) becomes
         this job's JobError, in the printer's words."""
@@ -405,6 +422,7 @@ class PrintJob:
             begin = dict(job=self.job_id, x0=x0, width=rip.width, height=rip.height,
                          dpi=rip.settings.dpi, row_nm=prof.row_nm, y0=planner.y0_rows + top)
             self._recovering(lambda: link.call(P.Op.JOB_BEGIN, **begin), "starting the job")
+            self._recovering(self._fire_delays, "setting the fire delays")
             paper0 = self.resume["paper0"] if self.resume else self._recovering(
                 lambda: link.status().paper_steps, "reading the paper position")
             next_stroke = resume_stroke(self.resume) if self.resume else 0

@@ -174,6 +174,9 @@ REG_FIFO_LEVEL0 = 0x8010  # .. 0x8017, read only
 REG_UNDERRUN = 0x8018     # read: bit h = head h underran
 REG_CONFIG = 0x8019       # read: bit h = head h configured
 REG_FIFO_FLAGS0 = 0x8020  # .. 0x8027, read only: the FIFO's flags (seed 4.2.2), see below
+REG_FIRE_DELAY_FWD0 = 0x8028  # .. 0x802F: head h's fire delay in forward lines, FIRE_DELAY_HZ ticks
+REG_FIRE_DELAY_REV0 = 0x8030  # .. 0x8037: the same in reverse lines (docs/calibration.md)
+FIRE_DELAY_HZ = 7_500_000     # the FPGA clock the delays count
 
 FIFO_EMPTY = 1 << 0
 FIFO_ALMOST_EMPTY = 1 << 1

@@ -33,6 +33,7 @@ COLORS = ("C", "M", "Y", "K")
 INTENTS = ("perceptual", "relative", "saturation", "absolute")   # as rip/color.py
 FPGA_HEAD_CHANNELS = 8
 WORDS_PER_FIRE = 8            # 128 nozzle bits in 16-bit FIFO words
+FINE_STEPS = 64               # fine steps per column of the bidir offset (docs/calibration.md)
 
 
 class ProfileError(ValueError):
@@ -355,6 +356,31 @@ class _Heads(_List):
         return heads
 
 
+class _HeadTable(_Spec):
+    """{ HEAD = value, ... } keyed by head names of [layout] heads (read before it)."""
+
+    def __init__(self, value: _Num):
+        self.value = value
+        self.kind = f"table head → {value.kind}"
+
+    def range(self) -> str:
+        return "keys: head names; heads not listed: 0"
+
+    def what(self) -> str:
+        return f"a table {{ HEAD = {self.value.what()}, ... }}"
+
+    def parse(self, v, at, ctx, got):
+        if not isinstance(v, dict):
+            raise at.bad(self, v)
+        names = [h.name for h in got["heads"]]
+        out = {}
+        for key, x in v.items():
+            if key not in names:
+                raise at.sub(key).error(f"no head {_show(key)} (heads: {', '.join(names)})")
+            out[key] = self.value.parse(x, at.sub(key), ctx, got)
+        return out
+
+
 class _DeadNozzles(_List):
     def __init__(self):
         super().__init__(_DEAD)
@@ -439,6 +465,16 @@ class LayoutSection(_Section):
     bidir_offset_columns: dict[int, int] = _key(_DpiTable(_Num(True), fill=0), {},
                                                 doc="columns reverse strokes are shifted by (bidir "
                                                 "alignment)")
+    bidir_fine_steps: dict[int, int] = _key(
+        _DpiTable(_Num(True, ge=-(FINE_STEPS - 1), le=FINE_STEPS - 1), fill=0), {},
+        doc=f"1/{FINE_STEPS} columns added to bidir_offset_columns (calibrate bidir; "
+        "docs/calibration.md)")
+    head_x_um: dict[str, float] = _key(_HeadTable(_Num(ge=-10000, le=10000)), {},
+                                       doc="measured: the head sits this far right of x_counts; "
+                                       "fired to match (calibrate heads)")
+    head_y_um: dict[str, float] = _key(_HeadTable(_Num(ge=-10000, le=10000)), {},
+                                       doc="measured: the head sits this far down the paper from "
+                                       "y_rows; recorded, not applied (under a nozzle pitch)")
 
     @property
     def heads_per_color(self) -> int:
@@ -517,6 +553,9 @@ class FeedSection(_Section):
     max_steps_s: float = _key(_Num(gt=0), doc="feed speed")
     accel_steps_s2: float = _key(_Num(gt=0), doc="feed acceleration")
     profile: str = _key(_Str(("trapezoid", "sigmoid")), "trapezoid", doc="feed speed profile")
+    travel_error_ppm: float = _key(_Num(ge=-50000, le=50000), 0.0,
+                                   doc="measured: the paper travels this much further than its "
+                                   "steps say; feeds are scaled to match (calibrate feed)")
 
     @property
     def um_per_step(self) -> float:
@@ -664,6 +703,29 @@ class Profile:
     def bidir_offset_columns(self) -> dict[int, int]:
         return self.layout.bidir_offset_columns
 
+    def bidir_shift_columns(self, dpi: int) -> float:
+        """Columns reverse strokes are shifted right by: whole plus fine steps."""
+        return (self.layout.bidir_offset_columns.get(dpi, 0)
+                + self.layout.bidir_fine_steps.get(dpi, 0) / FINE_STEPS)
+
+    def fire_shift(self, dpi: int) -> tuple[np.ndarray, np.ndarray]:
+        """How the calibration moves each head's drops (docs/calibration.md): per direction
+        (0 forward, 1 reverse) and head, whole columns `n` (the planner's data shift, right)
+        and the rest as a distance `f` >= 0 µm along the carriage's travel (the fire delay):
+        S = -head_x_um (+ the bidir shift in reverse) = n col + f forward, n col - f reverse."""
+        col_um = self.k(dpi) * 25_400.0 / self.counts_per_inch
+        n = np.zeros((2, len(self.heads)), np.int64)
+        f = np.zeros((2, len(self.heads)))
+        for h in self.heads:
+            for d in (0, 1):
+                shift = -self.layout.head_x_um.get(h.name, 0.0) / col_um
+                if d == 1:
+                    shift += self.bidir_shift_columns(dpi)
+                shift = round(shift * FINE_STEPS * 64) / (FINE_STEPS * 64)   # no float dust
+                n[d, h.index] = math.floor(shift) if d == 0 else math.ceil(shift)
+                f[d, h.index] = abs(shift - n[d, h.index]) * col_um
+        return n, f
+
     @property
     def nozzles(self) -> int:
         return self.head.nozzles
@@ -776,8 +838,10 @@ class Profile:
 
     def feed_steps_for_rows(self, rows_total: int) -> int:
         """Cumulative feed steps that put the paper `rows_total` rows from its start.
-        Rounded from the absolute target each time, so the error never accumulates."""
-        return int(round(rows_total * self.row_um / self.feed_um_per_step))
+        Rounded from the absolute target each time, so the error never accumulates; a
+        measured travel error (calibrate feed) scales the steps to match."""
+        return int(round(rows_total * self.row_um / self.feed_um_per_step
+                         / (1.0 + self.feed.travel_error_ppm * 1e-6)))
 
     # -- carriage ---------------------------------------------------------------------------
     def speed_counts_s(self, dpi: int) -> int:
@@ -856,7 +920,11 @@ def spec_markdown() -> str:
 
 def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | None = None,
                      head_x_counts: dict[str, int] | None = None,
-                     dead_nozzles=None) -> Profile:
+                     dead_nozzles=None, *, bidir_fine_steps: dict[int, int] | None = None,
+                     head_x_um: dict[str, float] | None = None,
+                     head_y_um: dict[str, float] | None = None,
+                     head_y_rows: dict[str, int] | None = None,
+                     travel_error_ppm: float | None = None) -> Profile:
     """Write calibration results into a profile file, keeping its comments and layout
     (tomlkit edits the document in place), and return the reloaded profile, which
     validates them; a result that does not load leaves the file as it was.
@@ -864,7 +932,10 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     bidir_offset_columns: {dpi: columns}, the whole table.  head_x_counts: {head: counts}.
     dead_nozzles: the complete new list of dead nozzles, as (head name, nozzle) pairs or
     {"head": ..., "nozzle": ...} tables (None leaves the list alone, an empty list clears
-    it); written as `dead_nozzles = [{ head = "M1", nozzle = 57 }, ...]` in [layout]."""
+    it); written as `dead_nozzles = [{ head = "M1", nozzle = 57 }, ...]` in [layout].
+    From scans (docs/calibration.md): bidir_fine_steps {dpi: 64ths}, head_x_um and head_y_um
+    {head: µm} (each the whole table), head_y_rows {head: rows}, and [feed]
+    travel_error_ppm."""
     path = Path(path)
     try:
         doc = tomlkit.parse(path.read_text())
@@ -875,20 +946,30 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     layout = doc.get("layout")
     if layout is None:
         raise ProfileError(f"{path}: no [layout] table to update")
-    if bidir_offset_columns is not None:
-        table = layout.get("bidir_offset_columns")
+    for key, values, conv in (("bidir_offset_columns", bidir_offset_columns, int),
+                              ("bidir_fine_steps", bidir_fine_steps, int),
+                              ("head_x_um", head_x_um, _um), ("head_y_um", head_y_um, _um)):
+        if values is None:
+            continue
+        table = layout.get(key)
         if table is None:                # optional key: add it
-            layout["bidir_offset_columns"] = tomlkit.inline_table()
-            table = layout["bidir_offset_columns"]
-        new = {str(int(k)): int(v) for k, v in sorted(bidir_offset_columns.items())}
-        for key in [k for k in table if k not in new]:
-            del table[key]
+            layout[key] = tomlkit.inline_table()
+            table = layout[key]
+        new = {str(k): conv(v) for k, v in sorted(values.items())}
+        for old in [k for k in table if k not in new]:
+            del table[old]
         table.update(new)
-    for name, counts in (head_x_counts or {}).items():
-        heads = [h for h in layout.get("heads", []) if h.get("name") == name]
-        if len(heads) != 1:
-            raise ProfileError(f"{path}: no head {name!r} to update")
-        heads[0]["x_counts"] = int(counts)
+    for key, values in (("x_counts", head_x_counts), ("y_rows", head_y_rows)):
+        for name, v in (values or {}).items():
+            heads = [h for h in layout.get("heads", []) if h.get("name") == name]
+            if len(heads) != 1:
+                raise ProfileError(f"{path}: no head {name!r} to update")
+            heads[0][key] = int(v)
+    if travel_error_ppm is not None:
+        feed = doc.get("feed")
+        if feed is None:
+            raise ProfileError(f"{path}: no [feed] table to update")
+        feed["travel_error_ppm"] = _um(travel_error_ppm)
     if dead_nozzles is not None:
         dead = _dead_nozzle_list(path, dead_nozzles)
         items = [f'{{ head = "{h}", nozzle = {z} }}' for h, z in dead]
@@ -901,6 +982,11 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     tmp.write_text(text)
     tmp.replace(path)
     return load_profile(path)
+
+
+def _um(v: float) -> float:
+    """A measured length as written: to a hundredth (of a µm, or a ppm)."""
+    return round(float(v), 2)
 
 
 def _dead_nozzle_list(path: Path, entries) -> list[tuple[str, int]]:

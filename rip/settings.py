@@ -33,7 +33,8 @@ ALIGNS = ("left", "center", "right")
 PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page boxes (docs/documents.md)
 MARKS = ("none", "crop", "registration")                           # layout marks (docs/layout.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
-TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align")
+TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align", "bidir-scan",
+                 "heads-scan", "feed-scan")
 
 #: largest placed image side, in device columns or rows (3.4 m at 600 dpi is 80,315 columns;
 #: 1,000,000 rows is 68.55 m of media)

@@ -16,7 +16,8 @@ The geometry is docs/geometry.md; in short, with N passes and A rows of paper ad
   of the nozzle run, hiding stroke-boundary banding); a dot whose slot is a dead nozzle
   moves to the next live j (nozzle-out compensation), so no dot is lost or doubled;
 - head h fires image column x at trigger column x - x_h / k (k = counts per column);
-  reverse strokes fire in descending columns, shifted by the profile's bidir offset.
+  reverse strokes fire in descending columns, shifted by the profile's bidir offset; the
+  calibration's whole-column head shifts are added per direction (docs/calibration.md).
 Memory: a rolling window of N*A rows plus one input band.
 """
 
@@ -79,8 +80,12 @@ class StrokePlanner:
         hpc = profile.heads_per_color
         # per head: nozzle -> slot
         self._head_slots = [h.y_rows + hpc * np.arange(profile.nozzles) for h in profile.heads]
-        self._head_cols = [h.x_counts // self.k for h in profile.heads]
-        self._bidir_offset = profile.bidir_offset_columns.get(dpi, 0)
+        # trigger column of image column 0, per direction and head: x_counts / k less the
+        # calibration's whole-column shift (the bidir offset is the reverse strokes'; the
+        # rest of the shift is the driver's fire delay, docs/calibration.md)
+        shift, _ = profile.fire_shift(dpi)
+        base = np.array([h.x_counts // self.k for h in profile.heads], np.int64)
+        self._head_cols = [base - shift[0], base - shift[1]]
         # rolling window of halftone rows: rows [self._base, self._base + self._len) held in
         # one preallocated buffer that grows only if a band is taller than any before, as
         # bits (rows, colour, width / 8): a 40,000 px wide window is 8x smaller than bytes
@@ -241,7 +246,8 @@ class StrokePlanner:
         if hi <= lo:
             return None
         heads = self.profile.heads
-        cols = np.array(self._head_cols, np.int64)
+        direction = (self._printed % 2) if self.bidir else 0     # if this stroke prints
+        cols = self._head_cols[direction]
         spread_lo = -int(cols.max())                  # trigger column of image column 0, farthest head
         fires_all = self.width + int(cols.max() - cols.min())
         words = np.zeros((len(heads), fires_all, 8), np.uint16)
@@ -271,12 +277,10 @@ class StrokePlanner:
         if t1 <= t0:
             return None
         words = words[:, t0:t1]
-        direction = (self._printed % 2) if self.bidir else 0
         self._printed += 1
         first = spread_lo + t0
         if direction == 1:
             words = words[:, ::-1]
-            first += self._bidir_offset
         return StrokeData(i, direction, top, first, np.ascontiguousarray(words), dots)
 
 

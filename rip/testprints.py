@@ -16,6 +16,10 @@ printed through the same planner and driver as any image.
                 the stroke boundary is the correction (docs/testprints.md)
 - head-align:   for every head, bars at x + o next to reference bars of head K1, for
                 o = -R..R; the straight block per head is that head's correction
+- bidir-scan, heads-scan, feed-scan: patterns measured on a scan to a fraction of a
+                column or row (`wideprint calibrate`, docs/calibration.md): vertical
+                segments and one-row dashes whose centroids are read, between two K bars
+                that locate the pattern on the scanner glass; `scan_layout` names them
 """
 
 from __future__ import annotations
@@ -86,11 +90,143 @@ def nozzle_check_layout(profile: Profile, width: int) -> NozzleCheck:
     return NozzleCheck(dash, blocks, rows, profile.heads_per_color, units * dash, s1 - s0)
 
 
+# -- patterns measured on a scan (docs/calibration.md) ----------------------------------------
+BAR_UM = 2000.0          # the K frame bars (fiducials): width
+BAR_GAP_UM = 1500.0      # paper between a bar and the marks
+SEG_PITCH_UM = 800.0     # between vertical segments: no window holds another's ink
+SEGMENTS = 4             # vertical segments per head block
+SEG_NOZZLES = (4, 124)   # a segment: these nozzles, one column
+DASH_UM = 1500.0         # a one-row dash (heads-scan)
+HEAD_DASH_NOZZLES = tuple(range(8, 124, 15))          # 8 dashes a head, 30 rows apart
+FEED_STROKES = 4
+FEED_NOZZLES = tuple(range(8, 124, 20))               # K1 dashes in every stroke
+FEED_DASH_UM = 3000.0
+FEED_DASHES_X = 3                                     # dashes per nozzle row, along the sweep
+SCAN_PATTERNS = ("bidir-scan", "heads-scan", "feed-scan")
+
+
+@dataclass(frozen=True)
+class Mark:
+    """One measured mark: cells [r0, r1) x [c0, c1) hold its dots and no other ink.
+    kind 'x' (a vertical segment: its x is read), 'y' (a one-row dash: its y), or
+    'dash' (a nozzle check dash: its ink)."""
+    kind: str
+    head: str
+    channel: int
+    stroke: int
+    nozzle: int
+    r0: int
+    r1: int
+    c0: int
+    c1: int
+
+
+@dataclass(frozen=True)
+class ScanLayout:
+    """A pattern to be scanned: its planes, its two K frame bars and its marks."""
+    kind: str
+    planes: np.ndarray
+    bars: tuple[Mark, Mark]
+    marks: tuple[Mark, ...]
+    rows_per_stroke: int
+
+
+def _cols(um: float, col_um: float) -> int:
+    return max(1, int(round(um / col_um)))
+
+
+def scan_layout(kind: str, profile: Profile, width: int, dpi: int = 150) -> ScanLayout:
+    """The marks of a scan pattern (SCAN_PATTERNS or nozzle-check), 1 pass, `width`
+    columns at `dpi`.  Sizes are in µm, so the pattern looks the same at every dpi."""
+    s0, s1 = profile.usable_slots()
+    a = s1 - s0                                   # rows per stroke, one pass
+    hpc = profile.heads_per_color
+    heads = profile.heads
+    if kind == "nozzle-check":
+        check = nozzle_check_layout(profile, width)
+        planes = make_pattern(kind, profile, width)
+        marks = []
+        for h in heads:
+            for z in range(1, profile.nozzles - 1):
+                r, x0, x1 = check.dash_at(h.name, z)
+                if 0 <= r < check.height:
+                    marks.append(Mark("dash", h.name, h.channel, 0, z, r, r + 1, x0, x1))
+        (b0, b1), (b2, b3) = check.bars
+        bars = (Mark("bar", "K", 3, 0, 0, 0, check.height, b0, b1),
+                Mark("bar", "K", 3, 0, 0, 0, check.height, b2, b3))
+        return ScanLayout(kind, planes, bars, tuple(marks), a)
+    if kind not in SCAN_PATTERNS:
+        raise ValueError(f"not a scan pattern: {kind!r} (one of nozzle-check, {', '.join(SCAN_PATTERNS)})")
+    col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
+    strokes = {"bidir-scan": 2, "heads-scan": 1, "feed-scan": FEED_STROKES}[kind]
+    planes = np.zeros((strokes * a, width, 4), np.uint8)
+    bar, gap = _cols(BAR_UM, col_um), _cols(BAR_GAP_UM, col_um)
+    inner0, inner1 = bar + gap, width - bar - gap
+    seg_pitch = _cols(SEG_PITCH_UM, col_um)
+
+    def row(h, z, stroke=0):
+        return h.y_rows + hpc * z - s0 + stroke * a
+
+    marks: list[Mark] = []
+
+    def segment(h, c, stroke):
+        rs = [row(h, z, stroke) for z in range(*SEG_NOZZLES)]
+        planes[rs, c, h.channel] = 1
+        marks.append(Mark("x", h.name, h.channel, stroke, 0, min(rs), max(rs) + 1, c, c + 1))
+
+    def dash(h, z, c0, c1, stroke):
+        r = row(h, z, stroke)
+        planes[r, c0:c1, h.channel] = 1
+        marks.append(Mark("y", h.name, h.channel, stroke, z, r, r + 1, c0, c1))
+
+    if kind == "feed-scan":
+        k1 = next(h for h in heads if h.name == "K1") if any(h.name == "K1" for h in heads) \
+            else profile.heads_of("K")[0]
+        dl = _cols(FEED_DASH_UM, col_um)
+        pitch = (inner1 - inner0) // FEED_DASHES_X
+        if pitch < dl + seg_pitch:
+            raise ValueError(f"feed-scan needs at least "
+                             f"{(2 * (BAR_UM + BAR_GAP_UM) + FEED_DASHES_X * (FEED_DASH_UM + SEG_PITCH_UM)) / 1000:.0f} mm")
+        for st in range(strokes):
+            for i in range(FEED_DASHES_X):
+                c0 = inner0 + i * pitch + (pitch - dl) // 2
+                for z in FEED_NOZZLES:
+                    dash(k1, z, c0, c0 + dl, st)
+    else:
+        dl = _cols(DASH_UM, col_um) if kind == "heads-scan" else 0
+        need = SEGMENTS * seg_pitch + (dl + seg_pitch if dl else 0)
+        pitch = (inner1 - inner0) // len(heads)
+        if pitch < need:
+            per = need * col_um / 1000
+            raise ValueError(f"{kind} needs at least {2 * (BAR_UM + BAR_GAP_UM) / 1000 + len(heads) * per:.0f} mm "
+                             f"({len(heads)} head blocks of {per:.1f} mm)")
+        for i, h in enumerate(heads):
+            x = inner0 + i * pitch + (pitch - need) // 2 + seg_pitch // 2
+            for j in range(SEGMENTS):
+                for st in range(strokes):
+                    segment(h, x + j * seg_pitch, st)
+            if dl:
+                c0 = x + SEGMENTS * seg_pitch
+                for z in HEAD_DASH_NOZZLES:
+                    dash(h, z, c0, c0 + dl, 0)
+    bars = []
+    for c0, c1 in ((0, bar), (width - bar, width)):        # every K nozzle, first stroke
+        for h in profile.heads_of("K"):
+            for z in range(1, profile.nozzles - 1):
+                r = row(h, z)
+                if 0 <= r < a:
+                    planes[r, c0:c1, h.channel] = 1
+        bars.append(Mark("bar", "K", 3, 0, 0, 0, a, c0, c1))
+    return ScanLayout(kind, planes, tuple(bars), tuple(marks), a)
+
+
 def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
-                 nozzle: int = 64) -> np.ndarray:
+                 nozzle: int = 64, dpi: int = 150) -> np.ndarray:
     """The pattern as planes (rows, width, 4) uint8 0/1 on the device grid, for 1 pass."""
     s0, s1 = profile.usable_slots()
     rows = s1 - s0
+    if kind in SCAN_PATTERNS:
+        return scan_layout(kind, profile, width, dpi).planes
     if kind == "line":
         if not 1 <= nozzle <= profile.nozzles - 2:
             raise ValueError(f"nozzle must be 1..{profile.nozzles - 2} (0 and 127 never fire)")
@@ -168,8 +304,9 @@ class PatternJob(PrintableJob):
     def for_pattern(cls, kind: str, profile: Profile, width: int, dpi: int = 150,
                     **kw) -> "PatternJob":
         """The pattern with the pass settings it needs (bidir-align prints bidirectionally)."""
-        planes = make_pattern(kind, profile, width, **kw)
-        return cls(kind, planes, RipSettings(dpi=dpi, passes=1, bidir=kind == "bidir-align"),
+        planes = make_pattern(kind, profile, width, dpi=dpi, **kw)
+        return cls(kind, planes, RipSettings(dpi=dpi, passes=1,
+                                             bidir=kind in ("bidir-align", "bidir-scan")),
                    profile)
 
     def __post_init__(self):

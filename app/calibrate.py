@@ -1,0 +1,437 @@
+"""`wideprint calibrate nozzles|bidir|heads|feed --scan SCAN.tif`: calibration from a scan
+of a test print (docs/calibration.md).
+
+The pattern is rebuilt from the profile, dpi and width it was printed with
+(`rip.testprints.scan_layout`), so every mark's model position is known. In the scan the
+two K frame bars are found (OpenCV connected components), the scanner's similarity
+transform is estimated from them (cv2.estimateAffinePartial2D), and every mark's
+darkness-weighted centroid or ink is read through it. What was measured is reported, and
+with --write stored in the printer profile (rip.profile.save_calibration).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..rip.profile import FINE_STEPS, Profile, ProfileError, load_profile, save_calibration
+
+if TYPE_CHECKING:      # the patterns import the RIP's kernels: not for `wideprint --help`
+    from ..rip.testprints import Mark, ScanLayout
+
+KINDS = {"nozzles": "nozzle-check", "bidir": "bidir-scan", "heads": "heads-scan",
+         "feed": "feed-scan"}
+EXIT_OK, EXIT_USAGE, EXIT_NOT_FOUND = 0, 2, 3
+BAND = (0, 1, 2, 1)          # the scan band each ink darkens most: C red, M green, Y blue, K
+NOISE_LEVELS = 6.0           # darkness below this is paper (four σ of a 1.5-level noise)
+DEAD_FRACTION = 0.35         # a dash with less ink than this of its head's median is dead
+MARK_MARGIN_UM = 250.0       # around an x or y mark's cells: the dot, the blur, the error
+REFERENCE_HEAD = "K1"
+TRIM_NOISE_UM = 1.0          # head trims below this are not written (the measurement's noise)
+
+
+class CalibrationError(Exception):
+    """The pattern was not found in the scan, or could not be measured."""
+
+
+# -- the scan -----------------------------------------------------------------------------------
+def read_scan(path: str, scan_dpi: float | None = None) -> tuple[np.ndarray, float]:
+    """(darkness per band (H, W, bands) float32, scan dpi).  Darkness is paper white less
+    the value, in 8-bit levels; the white is each band's 90th percentile."""
+    import tifffile
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        img = page.asarray()
+        if scan_dpi is None:
+            tags = page.tags
+            res = tags.get("XResolution")
+            unit = tags.get("ResolutionUnit")
+            if res is None:
+                raise CalibrationError(f"{path}: no resolution tags; give --scan-dpi")
+            num, den = res.value
+            scan_dpi = num / den * (2.54 if unit is not None and int(unit.value) == 3 else 1.0)
+    if img.dtype != np.uint8:
+        img = (img / (np.iinfo(img.dtype).max / 255.0) if img.dtype.kind == "u"
+               else img).astype(np.float32)
+    img = img.astype(np.float32)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    img = img[:, :, :3]
+    white = np.percentile(img[::4, ::4].reshape(-1, img.shape[2]), 90, axis=0)
+    return np.clip(white[None, None, :] - img, 0, None), float(scan_dpi)
+
+
+@dataclass
+class Registration:
+    """The scanner's similarity transform: model µm (image frame) -> scan pixels."""
+    M: np.ndarray            # 2 x 3
+    pix: float               # nominal µm per scan pixel
+
+    @property
+    def rotation_deg(self) -> float:
+        return math.degrees(math.atan2(self.M[1, 0], self.M[0, 0]))
+
+    @property
+    def scale(self) -> float:
+        """The scanner's true resolution / its nominal one."""
+        return math.hypot(self.M[0, 0], self.M[1, 0]) * self.pix
+
+    def to_scan(self, x_um, y_um):
+        M = self.M
+        return M[0, 0] * x_um + M[0, 1] * y_um + M[0, 2], M[1, 0] * x_um + M[1, 1] * y_um + M[1, 2]
+
+    def to_model(self, u, v):
+        A = np.linalg.inv(self.M[:, :2])
+        du, dv = u - self.M[0, 2], v - self.M[1, 2]
+        return A[0, 0] * du + A[0, 1] * dv, A[1, 0] * du + A[1, 1] * dv
+
+
+@dataclass
+class Measured:
+    """One mark measured: its model and measured centroids (µm) and its ink."""
+    mark: Mark
+    model: tuple[float, float]
+    got: tuple[float, float] | None      # None: no ink
+    ink: float
+
+    @property
+    def dx(self) -> float:
+        return self.got[0] - self.model[0]
+
+    @property
+    def dy(self) -> float:
+        return self.got[1] - self.model[1]
+
+
+class Scan:
+    """A scan of a pattern, registered: marks are measured in the image frame."""
+
+    def __init__(self, dark: np.ndarray, scan_dpi: float, layout: ScanLayout, profile: Profile,
+                 dpi: int):
+        self.dark, self.layout, self.profile = dark, layout, profile
+        self.pix = 25_400.0 / scan_dpi
+        self.col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
+        self.row_um = profile.row_um
+        self.grey = dark.shape[2] == 1
+        self.reg = self._register()
+
+    def band(self, channel: int) -> np.ndarray:
+        return self.dark[:, :, 0 if self.grey else BAND[channel]]
+
+    def model_centroid(self, m: Mark) -> tuple[float, float]:
+        """Mean cell centre of the mark's dots (µm, image frame)."""
+        rr, cc = np.nonzero(self.layout.planes[m.r0:m.r1, m.c0:m.c1, m.channel])
+        if m.kind == "bar":
+            rr, cc = np.nonzero(self.layout.planes[m.r0:m.r1, m.c0:m.c1].any(axis=2))
+        return (float((cc + m.c0 + 0.5).mean() * self.col_um),
+                float((rr + m.r0 + 0.5).mean() * self.row_um))
+
+    def window(self, m: Mark, margin_x: float, margin_y: float, img: np.ndarray,
+               reg: Registration | None = None):
+        """(weights, model x, model y) of the scan pixels whose model position lies in the
+        mark's cells widened by the margins (µm)."""
+        reg = reg or self.reg
+        x0, x1 = m.c0 * self.col_um - margin_x, m.c1 * self.col_um + margin_x
+        y0, y1 = m.r0 * self.row_um - margin_y, m.r1 * self.row_um + margin_y
+        u, v = reg.to_scan(np.array([x0, x1, x0, x1]), np.array([y0, y0, y1, y1]))
+        h, w = img.shape[:2]
+        u0, u1 = max(0, int(math.floor(u.min()))), min(w, int(math.ceil(u.max())) + 1)
+        v0, v1 = max(0, int(math.floor(v.min()))), min(h, int(math.ceil(v.max())) + 1)
+        if u1 <= u0 or v1 <= v0:
+            return np.zeros(0), np.zeros(0), np.zeros(0)
+        vv, uu = np.mgrid[v0:v1, u0:u1].astype(np.float64)
+        mx, my = reg.to_model(uu, vv)
+        inside = (mx >= x0) & (mx < x1) & (my >= y0) & (my < y1)
+        wgt = np.clip(img[v0:v1, u0:u1].astype(np.float64) - NOISE_LEVELS, 0, None) * inside
+        return wgt, mx, my
+
+    def _register(self) -> Registration:
+        import cv2
+        allink = self.dark.max(axis=2)
+        top = float(np.percentile(allink, 99.9))
+        if top < 4 * NOISE_LEVELS:
+            raise CalibrationError("the scan is blank: no pattern found")
+        binary = (allink > max(2 * NOISE_LEVELS, 0.4 * top)).astype(np.uint8)
+        close = max(3, int(round(250.0 / self.pix)) | 1)          # the bar's rows merge
+        binary = cv2.morphologyEx(binary, cv2.MORPH_CLOSE, np.ones((close, close), np.uint8))
+        n, labels, stats, cents = cv2.connectedComponentsWithStats(binary, connectivity=8)
+        if n < 3:
+            raise CalibrationError("the pattern's frame bars were not found in the scan")
+        order = np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:2] + 1
+        bars = self.layout.bars
+        want = [(b.c1 - b.c0) * self.col_um * (b.r1 - b.r0) * self.row_um / self.pix ** 2
+                for b in bars]
+        for i in order:
+            area = stats[i, cv2.CC_STAT_AREA]
+            if not 0.4 * min(want) <= area <= 2.5 * max(want):
+                raise CalibrationError(
+                    f"the pattern's frame bars were not found in the scan (the largest dark "
+                    f"object is {area * self.pix ** 2 / 1e6:.1f} mm², a bar "
+                    f"{want[0] * self.pix ** 2 / 1e6:.1f} mm²): is it the right pattern, dpi and width?")
+        found = sorted((cents[i] for i in order), key=lambda c: c[0])     # left, right
+        model = np.array([self.model_centroid(b) for b in bars])
+        src, dst = model.astype(np.float32), np.array(found, np.float32)
+        coarse = Registration(self._similarity(src, dst), self.pix)
+        # the bars' darkness-weighted centroids, each in its own window
+        fine = []
+        for b in bars:
+            wgt, mx, my = self.window(b, 150.0, 150.0, allink, coarse)
+            if wgt.sum() <= 0:
+                raise CalibrationError("a frame bar lies outside the scan")
+            u, v = coarse.to_scan((wgt * mx).sum() / wgt.sum(), (wgt * my).sum() / wgt.sum())
+            fine.append((u, v))
+        reg = Registration(self._similarity(src, np.array(fine, np.float32)), self.pix)
+        if abs(reg.rotation_deg) > 10 or not 0.9 < reg.scale < 1.1:
+            raise CalibrationError(f"the pattern lies at {reg.rotation_deg:.1f}° and scale "
+                                   f"{reg.scale:.3f} on the scan: not this pattern?")
+        return reg
+
+    @staticmethod
+    def _similarity(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+        import cv2
+        M, _ = cv2.estimateAffinePartial2D(src.reshape(-1, 1, 2), dst.reshape(-1, 1, 2),
+                                           method=cv2.LMEDS)
+        if M is None:
+            raise CalibrationError("the frame bars give no transform")
+        return M
+
+    def measure(self, m: Mark) -> Measured:
+        model = self.model_centroid(m)
+        if m.kind == "dash":          # neighbours are a column and two rows away
+            wgt, mx, my = self.window(m, -0.0, 0.5 * self.row_um, self.band(m.channel))
+        else:
+            wgt, mx, my = self.window(m, MARK_MARGIN_UM, MARK_MARGIN_UM, self.band(m.channel))
+        ink = float(wgt.sum()) * self.pix ** 2
+        if ink <= 0:
+            return Measured(m, model, None, 0.0)
+        return Measured(m, model, (float((wgt * mx).sum() / wgt.sum()),
+                                   float((wgt * my).sum() / wgt.sum())), ink)
+
+
+# -- the calibrations ---------------------------------------------------------------------------
+@dataclass
+class Result:
+    kind: str
+    dpi: int
+    text: list[str] = field(default_factory=list)
+    found: dict = field(default_factory=dict)          # for --json and tests
+    write: dict = field(default_factory=dict)          # save_calibration keyword arguments
+
+
+def _mean_std(v) -> tuple[float, float]:
+    v = np.asarray(v, np.float64)
+    return float(v.mean()), float(v.std())
+
+
+def calibrate_nozzles(scan: Scan, res: Result) -> None:
+    prof = scan.profile
+    dead, weak = [], {}
+    ms = [scan.measure(m) for m in scan.layout.marks]
+    for h in prof.heads:
+        mine = [m for m in ms if m.mark.head == h.name]
+        ink = np.array([m.ink for m in mine])
+        med = float(np.median(ink))
+        if med <= 0:
+            raise CalibrationError(f"head {h.name}: no ink found in its block")
+        for m, v in zip(mine, ink):
+            if v < DEAD_FRACTION * med:
+                dead.append((h.name, m.mark.nozzle))
+                weak[f"{h.name}:{m.mark.nozzle}"] = round(v / med, 3)
+    names = [f"{h}:{z}" for h, z in dead]
+    res.found = dict(dead=names, ink_fraction=weak, dashes=len(ms))
+    res.text.append(f"nozzles: {len(ms)} dashes measured; "
+                    + (f"{len(dead)} dead: {', '.join(names)}" if dead else "no dead nozzle"))
+    res.write = dict(dead_nozzles=dead)
+
+
+def _by_head(ms: list[Measured], stroke: int | None = None, kind: str = "x") -> dict:
+    out: dict[str, list[Measured]] = {}
+    for m in ms:
+        if m.got is not None and m.mark.kind == kind and (stroke is None or m.mark.stroke == stroke):
+            out.setdefault(m.mark.head, []).append(m)
+    return out
+
+
+def calibrate_bidir(scan: Scan, res: Result) -> None:
+    prof, dpi, col = scan.profile, res.dpi, scan.col_um
+    ms = [scan.measure(m) for m in scan.layout.marks]
+    fwd, rev = _by_head(ms, 0), _by_head(ms, 1)
+    per_head = {h: float(np.mean([m.dx for m in rev[h]]) - np.mean([m.dx for m in fwd[h]]))
+                for h in fwd if h in rev}
+    if not per_head:
+        raise CalibrationError("no head printed segments in both strokes")
+    d, sd = _mean_std(list(per_head.values()))
+    old = prof.bidir_shift_columns(dpi)
+    new = old - d / col
+    steps = int(round(new * FINE_STEPS))
+    whole, fine = int(round(steps / FINE_STEPS)), 0
+    fine = steps - whole * FINE_STEPS
+    res.found = dict(offset_um=round(d, 2), offset_columns=round(d / col, 4), spread_um=round(sd, 2),
+                     per_head_um={h: round(v, 2) for h, v in per_head.items()},
+                     correction_columns=round(steps / FINE_STEPS, 4),
+                     bidir_offset_columns=whole, bidir_fine_steps=fine)
+    res.text.append(f"bidir at {dpi} dpi: reverse strokes land {d:+.1f} µm ({d / col:+.3f} columns) "
+                    f"from forward ones ({len(per_head)} heads, spread {sd:.1f} µm)")
+    res.text.append(f"  correction: reverse strokes {steps / FINE_STEPS:+.4f} columns "
+                    f"(bidir_offset_columns {whole}, bidir_fine_steps {fine}/{FINE_STEPS}; "
+                    f"was {old:+.4f})")
+    offs, fines = dict(prof.bidir_offset_columns), dict(prof.layout.bidir_fine_steps)
+    offs[dpi], fines[dpi] = whole, fine
+    res.write = dict(bidir_offset_columns=offs, bidir_fine_steps=fines)
+
+
+def calibrate_heads(scan: Scan, res: Result) -> None:
+    prof = scan.profile
+    ms = [scan.measure(m) for m in scan.layout.marks]
+    xs, ys = _by_head(ms, kind="x"), _by_head(ms, kind="y")
+    ref = REFERENCE_HEAD if REFERENCE_HEAD in xs else prof.heads_of("K")[0].name
+    if ref not in xs or ref not in ys:
+        raise CalibrationError(f"the reference head {ref} printed nothing measurable")
+    rx, ry = np.mean([m.dx for m in xs[ref]]), np.mean([m.dy for m in ys[ref]])
+    pitch = prof.nozzle_pitch_um
+    x_um, y_um = dict(prof.layout.head_x_um), {}
+    y_rows, found = {}, {}
+    res.text.append(f"heads (relative to {ref}; right and down the paper are +):")
+    for h in prof.heads:
+        if h.name not in xs or h.name not in ys:
+            raise CalibrationError(f"head {h.name}: no marks measured")
+        dx = float(np.mean([m.dx for m in xs[h.name]]) - rx)
+        dy = float(np.mean([m.dy for m in ys[h.name]]) - ry)
+        sx, sy = np.std([m.dx for m in xs[h.name]]), np.std([m.dy for m in ys[h.name]])
+        found[h.name] = dict(x_um=round(dx, 2), y_um=round(dy, 2))
+        new_x = x_um.get(h.name, 0.0) + dx       # the x trim is applied: dx is what is left
+        pitches = int(round(dy / pitch)) if abs(dy) >= pitch / 2 else 0
+        new_y = dy - pitches * pitch            # the y trim is not applied: dy is all of it
+        line = f"  {h.name}: x {dx:+6.1f} µm (±{sx:.1f}), y {dy:+6.1f} µm (±{sy:.1f})"
+        if pitches:
+            y_rows[h.name] = h.y_rows + prof.heads_per_color * pitches
+            line += f"; y_rows {h.y_rows} -> {y_rows[h.name]}"
+        if abs(new_y) > 5.0:
+            line += f"; adjust the head {-new_y:+.0f} µm along the feed (mechanically)"
+        res.text.append(line)
+        if h.name != ref and abs(dx) >= TRIM_NOISE_UM:      # below: measurement noise
+            x_um[h.name] = round(new_x, 2)
+        if abs(new_y) >= TRIM_NOISE_UM:
+            y_um[h.name] = round(new_y, 2)
+    res.found = dict(reference=ref, heads=found)
+    res.write = dict(head_x_um={k: v for k, v in x_um.items() if abs(v) >= 0.005},
+                     head_y_um=y_um)
+    if y_rows:
+        res.write["head_y_rows"] = y_rows
+
+
+def feed_offsets(scan: Scan, res_strokes: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """Per stroke of the feed pattern: the mean y displacement of its dashes (µm, stroke 0
+    = 0), what the driver's whole-step feeds put there (the same), and the steps of one
+    feed."""
+    prof = scan.profile
+    ms = [scan.measure(m) for m in scan.layout.marks]
+    a = scan.layout.rows_per_stroke
+    strokes = sorted({m.mark.stroke for m in ms})
+    dy = np.array([np.mean([m.dy for m in ms if m.mark.stroke == s and m.got is not None])
+                   for s in strokes])
+    steps = np.array([prof.feed_steps_for_rows(s * a) for s in strokes])
+    rounding = steps * prof.feed_um_per_step - np.array(strokes) * a * prof.row_um
+    return dy - dy[0], rounding - rounding[0], int(round((steps[-1] - steps[0]) / (len(strokes) - 1)))
+
+
+def calibrate_feed(scan: Scan, res: Result) -> None:
+    prof = scan.profile
+    dy, rounding, steps = feed_offsets(scan)
+    i = np.arange(len(dy))
+    place = float(np.polyfit(i, dy, 1)[0])                 # where each stroke lands
+    extra = float(np.polyfit(i, dy - rounding, 1)[0])      # beyond what the steps say
+    ppm = extra / (steps * prof.feed_um_per_step) * 1e6
+    res.found = dict(placement_um_per_feed=round(place, 2), travel_error_um_per_feed=round(extra, 2),
+                     steps_per_feed=steps, travel_error_ppm=round(ppm, 2),
+                     stroke_offsets_um=[round(float(v), 2) for v in dy])
+    res.text.append(f"feed: each stroke lands {place:+.1f} µm from where it should (strokes at "
+                    + ", ".join(f"{v:+.1f}" for v in dy) + " µm)")
+    res.text.append(f"  the paper travels {extra:+.1f} µm further than its {steps} steps "
+                    f"per feed: {ppm:+.0f} ppm (profile: {prof.feed.travel_error_ppm:+.0f} ppm)")
+    res.write = dict(travel_error_ppm=ppm)
+
+
+CALIBRATIONS = {"nozzles": calibrate_nozzles, "bidir": calibrate_bidir,
+                "heads": calibrate_heads, "feed": calibrate_feed}
+
+
+def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width_mm: float = 100.0,
+              scan_dpi: float | None = None) -> Result:
+    """Measure a scan of the `kind` pattern printed with `profile` at `dpi`, `width_mm`."""
+    from ..rip.testprints import scan_layout
+    k = profile.k(dpi)
+    width = int(round(width_mm / 25.4 * profile.counts_per_inch / k))
+    layout = scan_layout(KINDS[kind], profile, width, dpi)
+    dark, sdpi = read_scan(scan_path, scan_dpi)
+    scan = Scan(dark, sdpi, layout, profile, dpi)
+    res = Result(kind, dpi)
+    res.text.append(f"{scan_path}: {KINDS[kind]} at {dpi} dpi found on a {sdpi:g} dpi scan, "
+                    f"rotated {scan.reg.rotation_deg:+.2f}°, scale {scan.reg.scale:.4f}")
+    res.found["registration"] = dict(rotation_deg=round(scan.reg.rotation_deg, 4),
+                                     scale=round(scan.reg.scale, 6))
+    found = res.found
+    CALIBRATIONS[kind](scan, res)
+    res.found = {**found, **res.found}
+    return res
+
+
+# -- the command --------------------------------------------------------------------------------
+def cmd_calibrate(args) -> int:
+    try:
+        profile = load_profile(args.profile)
+        if args.write and not args.profile:
+            raise ValueError("--write needs --profile: the printer profile to update "
+                             "(a copy of the built-in one)")
+        res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi)
+    except (ValueError, ProfileError, OSError) as exc:
+        print(f"wideprint calibrate: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CalibrationError as exc:
+        print(f"wideprint calibrate {args.kind}: {exc}", file=sys.stderr)
+        return EXIT_NOT_FOUND
+    written = None
+    if args.write:
+        try:
+            save_calibration(args.profile, **res.write)
+            written = args.profile
+        except ProfileError as exc:
+            print(f"wideprint calibrate: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+    if args.json:
+        print(json.dumps(dict(kind=res.kind, dpi=res.dpi, found=res.found, written=written),
+                         ensure_ascii=False))
+    else:
+        print("\n".join(res.text))
+        print(f"written to {written}" if written else "(not written: --write stores it in --profile)")
+    return EXIT_OK
+
+
+def add_parser(sub) -> None:
+    from ..rip.settings import setting
+    p = sub.add_parser("calibrate", help="measure a scanned calibration print and store the "
+                       "result in the printer profile (docs/calibration.md)",
+                       description="Finds the test pattern in a scan (any placement, a few "
+                       "degrees of rotation), measures it and reports dead nozzles, the "
+                       "bidirectional offset, head x/y offsets or the feed error; --write stores "
+                       "it in --profile. Print the pattern first: wideprint test-print "
+                       "nozzle-check|bidir-scan|heads-scan|feed-scan.")
+    p.add_argument("kind", choices=tuple(KINDS))
+    p.add_argument("--scan", required=True, metavar="SCAN.tif", help="the scan (TIFF)")
+    p.add_argument("--dpi", type=int, choices=setting("dpi").choices, default=150,
+                   help="the dpi mode the pattern was printed at (default 150)")
+    p.add_argument("--width-mm", type=float, default=100.0,
+                   help="the pattern's length along the sweep, as printed (default 100)")
+    p.add_argument("--scan-dpi", type=float, metavar="N",
+                   help="the scan's resolution (default: its TIFF resolution tags)")
+    p.add_argument("--profile", metavar="TOML", help="the profile the pattern was printed with; "
+                   "--write updates it")
+    p.add_argument("--write", action="store_true", help="store the result in --profile")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_calibrate)
+
