@@ -224,6 +224,9 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("nest_length_mm", float, None, "nesting: start a job when it is this long",
             group="placement", section="layout", nullable=True, positive=True, metavar="MM",
             label="Nest length"),
+    Setting("nest_wait_s", float, None, "print server: start a nest when its first job has "
+            "waited this long (seconds), however few jobs it holds", group="placement",
+            section="layout", nullable=True, nonnegative=True, metavar="S", label="Nest wait"),
     Setting("nest_width_mm", float, None, "nesting: the width to pack into (default: the "
             "paper less the side margins)", group="placement", section="layout", nullable=True,
             positive=True, metavar="MM", label="Nest width"),
@@ -318,6 +321,7 @@ class Placement:
     nest_rotate: bool = False  # nested items may be turned 90 degrees
     nest_count: int | None = None  # start rule: files per nest
     nest_length_mm: float | None = None  # start rule: nest length reached
+    nest_wait_s: float | None = None  # start rule (print server): the first job waited this long
     nest_width_mm: float | None = None  # width to pack into; None: the paper less the margins
     tile_width_mm: float | None = None  # tiling on when either tile size is given
     tile_height_mm: float | None = None

@@ -15,6 +15,28 @@ ROOT = Path(__file__).resolve().parent.parent
 
 from wideprint.rip.place import Placement  # noqa: E402
 
+
+def _import_the_package_now() -> None:
+    """pytest rewrites the asserts of every module of wideprint (its pytest11 plugin makes
+    the distribution a plugin), compiling each module's source when it is first imported.
+    CPython 3.11's compiler is not safe to run on two threads at once ("AST constructor
+    recursion depth mismatch"): a module first imported by a server's worker thread while
+    the test imports another fails at random.  So every module is imported here, once,
+    before any test starts a thread (the GUI's only when PySide6 is there)."""
+    import importlib
+    import pkgutil
+    import wideprint
+    for m in pkgutil.walk_packages(wideprint.__path__, "wideprint."):
+        if ".gui" in m.name or m.name.endswith("__main__"):
+            continue
+        try:
+            importlib.import_module(m.name)
+        except Exception:  # noqa: BLE001 - an optional dependency: that module's tests say so
+            pass
+
+
+_import_the_package_now()
+
 # 1 image pixel = 1 device dot: the placement for tests that compare the media with the
 # planes they wrote (a physical-size placement resamples them)
 PX = Placement(size="pixels")

@@ -21,6 +21,8 @@ STATE_COLORS = {"failed": "#c62828", "cancelled": "#6d6d6d", "held": "#b26a00",
 
 def state_text(job: dict) -> str:
     st = job["state"]
+    if job.get("nested_in") and st not in ("done", "failed", "cancelled"):
+        return f"nested on job {job['nested_in']}"
     if st == "held" and job.get("fault"):
         return "stopped: printer fault"
     if st == "queued" and job.get("interrupted"):

@@ -297,6 +297,11 @@ class PrintServer:
                 time.sleep(0.05)
             return job
         self.hot_done(job, "cancelled", "cancelled by the operator")
+        for m in self.spool.members(job):        # a nested sheet not started: its jobs too
+            if m["state"] not in ("done", "failed", "cancelled"):
+                self.spool.finish(m["id"], "cancelled", f"job {job_id}'s nested sheet was "
+                                  "cancelled", keep_copy=keep)
+                self.hot_done(m, "cancelled", "cancelled with its nested sheet")
         if before and before.get("spool_path") and not keep:
             try:
                 os.unlink(before["spool_path"])

@@ -57,7 +57,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     attempt      INTEGER NOT NULL DEFAULT 1,  -- 1, then +1 each time the operator requeues it
     printer      TEXT,                        -- the printer asked for (NULL: any printer)
     printed_on   TEXT,                        -- the printer that took it (its checkpoint is that printer's)
-    fault        TEXT NOT NULL DEFAULT ''     -- a printer fault stopped it: held until cleared
+    fault        TEXT NOT NULL DEFAULT '',    -- a printer fault stopped it: held until cleared
+    nest_members TEXT,                        -- JSON [ids]: the jobs nested on this job's sheet
+    nested_in    INTEGER                      -- printed on that job's sheet (a nest member)
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -90,14 +92,17 @@ CREATE TABLE IF NOT EXISTS prints (
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
 """
 
-SCHEMA_VERSION = "4"
+SCHEMA_VERSION = "5"
 # columns added since schema 1: (table, column, definition), added to older databases;
-# schema 4: several printers (printer, printed_on), a fault stops a job (fault)
+# schema 4: several printers (printer, printed_on), a fault stops a job (fault); schema 5:
+# the server nests jobs on one sheet (nest_members on the sheet's job, nested_in on the others)
 ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("jobs", "printer", "TEXT"),
                  ("jobs", "printed_on", "TEXT"),
-                 ("jobs", "fault", "TEXT NOT NULL DEFAULT ''"))
+                 ("jobs", "fault", "TEXT NOT NULL DEFAULT ''"),
+                 ("jobs", "nest_members", "TEXT"),
+                 ("jobs", "nested_in", "INTEGER"))
 # columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
 # carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
 RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
@@ -255,7 +260,8 @@ class Spool:
         """The first `limit` jobs `printer` may print, in the order next_job takes them (the
         worker skips "any" jobs its paper cannot hold: docs/server.md, "Several printers")."""
         rows = self.db.execute(
-            "SELECT * FROM jobs WHERE state='queued' AND (printer IS NULL OR printer=?) "
+            "SELECT * FROM jobs WHERE state='queued' AND nested_in IS NULL "
+            "AND (printer IS NULL OR printer=?) "
             "AND (interrupted=0 OR printed_on IS NULL OR printed_on=?) "
             f"{self.QUEUE_ORDER} LIMIT ?", (printer, printer, limit)).fetchall()
         return [_job_dict(r) for r in rows]
@@ -266,17 +272,20 @@ class Spool:
         among the jobs for this printer or for any; held jobs wait.  A job interrupted on
         another printer waits for that one (its checkpoint is that printer's)."""
         if printer is None:
-            row = self.db.execute(f"SELECT * FROM jobs WHERE state='queued' {self.QUEUE_ORDER} LIMIT 1"
+            row = self.db.execute("SELECT * FROM jobs WHERE state='queued' AND nested_in IS NULL "
+                                  f"{self.QUEUE_ORDER} LIMIT 1"
                                   ).fetchone()
         else:
             row = self.db.execute(
-                "SELECT * FROM jobs WHERE state='queued' AND (printer IS NULL OR printer=?) "
+                "SELECT * FROM jobs WHERE state='queued' AND nested_in IS NULL "
+                "AND (printer IS NULL OR printer=?) "
                 "AND (interrupted=0 OR printed_on IS NULL OR printed_on=?) "
                 f"{self.QUEUE_ORDER} LIMIT 1", (printer, printer)).fetchone()
         return _job_dict(row) if row else None
 
     def queue_position(self) -> dict[int, int]:
-        rows = self.db.execute(f"SELECT id FROM jobs WHERE state='queued' {self.QUEUE_ORDER}")
+        rows = self.db.execute("SELECT id FROM jobs WHERE state='queued' AND nested_in IS NULL "
+                               f"{self.QUEUE_ORDER}")
         return {r[0]: i + 1 for i, r in enumerate(rows)}
 
     def claim(self, job_id: int, printer: str | None = None) -> dict | None:
@@ -305,6 +314,28 @@ class Spool:
         job = _job_dict(row)
         job["epoch"] = epoch
         return job
+
+    def nest(self, leader: int, members: list[int]) -> bool:
+        """The queued jobs `members` go on job `leader`'s sheet (docs/server.md, "Nesting
+        jobs"): the leader is claimed as usual; the members leave the queue, printing with
+        it.  False when one of them is no longer queued (taken, cancelled, held)."""
+        if not members:
+            return True
+        with self.tx() as c:
+            marks = ",".join("?" * len(members))
+            n = c.execute(f"SELECT COUNT(*) FROM jobs WHERE id IN ({marks}) AND state='queued' "
+                          "AND nested_in IS NULL", members).fetchone()[0]
+            if n != len(members):
+                return False
+            c.execute(f"UPDATE jobs SET state='printing', nested_in=?, started=?, "
+                      f"message=? WHERE id IN ({marks})",
+                      (leader, time.time(), f"nested on job {leader}'s sheet", *members))
+            c.execute("UPDATE jobs SET nest_members=? WHERE id=?", (json.dumps(members), leader))
+        return True
+
+    def members(self, leader: dict) -> list[dict]:
+        ids = json.loads(leader.get("nest_members") or "[]")
+        return [j for j in (self.get(i) for i in ids) if j is not None]
 
     def save_checkpoint(self, job_id: int, checkpoint: dict, strokes_total: int) -> None:
         """After every stroke: where a restarted server resumes this job."""
@@ -477,6 +508,7 @@ class Spool:
             # hot_path: the original already went to failed/ with the first attempt's reason;
             # the new attempt moves no hot-folder file (a new file of that name is a new job)
             c.execute("UPDATE jobs SET state='queued', attempt=attempt+1, message='', "
+                      "nested_in=NULL, nest_members=NULL, "
                       "copies_done=0, strokes_done=0, strokes_total=0, checkpoint=NULL, "
                       "interrupted=0, started=NULL, finished=NULL, copy_started=NULL, "
                       "hot_path=NULL WHERE id=?", (job_id,))
@@ -496,7 +528,11 @@ class Spool:
         row = c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone()
         if row is None:
             raise SpoolError(f"no job {job_id}", 404)
-        return _job_dict(row)
+        job = _job_dict(row)
+        if job.get("nested_in") and job["state"] not in FINAL:
+            raise SpoolError(f"job {job_id} prints on job {job['nested_in']}'s nested sheet: "
+                             f"act on job {job['nested_in']}")
+        return job
 
     def recover(self, on_crash: str) -> list[dict]:
         """At start-up: jobs left `printing` by a server that died.  `resume`: back to the

@@ -246,7 +246,16 @@ class Worker(threading.Thread):
         paper is wide enough; when no printer's paper holds it, the first free printer
         takes it and the job fails with its own reason (docs/server.md, "Several printers")."""
         for job in self.spool.next_jobs(self.name_):
-            if job["printer"] is not None or job["interrupted"]:
+            if job["interrupted"]:
+                return job
+            if (job["settings"].get("placement") or {}).get("nest") and not job["nest_members"]:
+                group = self._nest_group(job)
+                if group is None:
+                    continue                     # waiting for its rule: the next job goes first
+                if not self.spool.nest(job["id"], [j["id"] for j in group[1:]]):
+                    return None                  # the queue changed under us: look again
+                return self.spool.get(job["id"])
+            if job["printer"] is not None:
                 return job
             need = self.srv.job_width_mm(job, self.profile)
             if need is None or self.fits(need):
@@ -254,6 +263,38 @@ class Worker(threading.Thread):
             if not any(w.fits(need) for w in self.srv.workers.values() if w is not self):
                 return job
         return None
+
+    def _nest_group(self, first: dict) -> list[dict] | None:
+        """The jobs to nest on one sheet with `first` (docs/server.md, "Nesting jobs"): the
+        queued jobs asking to nest with the same settings and one copy each, for this
+        printer or any, in queue order, once the nest's start rule holds — `nest_count`
+        jobs, a sheet `nest_length_mm` long, or the first job waiting `nest_wait_s`; with
+        no rule, whatever is queued now.  None: not yet."""
+        pl = first["settings"].get("placement") or {}
+        key = json.dumps(first["settings"], sort_keys=True)
+        group = [j for j in self.spool.next_jobs(self.name_, limit=1000)
+                 if not j["interrupted"] and not j["nest_members"] and j["copies"] == 1
+                 and json.dumps(j["settings"], sort_keys=True) == key]
+        if not group or group[0]["id"] != first["id"]:
+            group = [first] + [j for j in group if j["id"] != first["id"]]
+        count, length, wait = pl.get("nest_count"), pl.get("nest_length_mm"), pl.get("nest_wait_s")
+        if count:
+            group = group[:count]
+            if len(group) >= count:
+                return group
+        if length:
+            from ...rip.layout import plan_layout
+            from .validate import rip_settings
+            try:
+                plan = plan_layout([j["spool_path"] for j in group], rip_settings(first["settings"]),
+                                   self.profile, self.paper_mm)
+                if plan.height_mm >= length:
+                    return group
+            except (ValueError, OSError):
+                return group                     # the sheet's own problem: it fails printing
+        if wait is not None:
+            return group if time.time() - first["submitted"] >= wait else None
+        return None if (count or length) else group
 
     def printable_mm(self) -> float:
         """This printer's paper (measured at its last job, else its profile's sheet) less
@@ -347,8 +388,10 @@ class Worker(threading.Thread):
                               resumed)
                 self._finish(job, "cancelled", "cancelled by the operator")
                 return
+            members = self.spool.members(job)
             try:
-                rip = RipJob(job["spool_path"], rip_settings(settings), self.profile)
+                rip = RipJob(job["spool_path"], rip_settings(settings), self.profile,
+                             more=tuple(m["spool_path"] for m in members))
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
                 self._account(job, copy, started, None, "failed", msg, resumed)
@@ -437,6 +480,10 @@ class Worker(threading.Thread):
         printer.end_open_job(job_id)
 
     def _finish(self, job: dict, state: str, message: str) -> None:
+        for m in self.spool.members(job):          # a nested sheet: its jobs end with it
+            if m["state"] not in ("done", "failed", "cancelled"):
+                self._finish(m, state, (f"on job {job['id']}'s nested sheet: {message}"
+                                        if message else f"printed on job {job['id']}'s nested sheet"))
         self.srv.hot_done(job, state, message)
         keep = self.srv.keeps_copy(state)
         self.spool.finish(job["id"], state, message, keep_copy=keep)
