@@ -779,7 +779,7 @@ def test_schema_1_database_gets_the_attempt_columns(tmp_path):
     sp = Spool(state)
     assert sp.get(1)["attempt"] == 1
     assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
-    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "5"
     sp.close()
 
 
@@ -808,7 +808,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     db.close()
     sp = Spool(state)
     try:
-        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "4"
+        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "5"
         for table in ("jobs", "prints"):
             cols = {r[1] for r in sp.db.execute(f"PRAGMA table_info({table})")}
             assert not {c for c in cols if c.startswith("passes")}, cols
