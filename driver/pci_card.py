@@ -43,8 +43,9 @@ class VfioCard:
         self._next_iova = IOVA_BASE
         self.error_fd = None
         try:
+            group = group_of(bdf)           # first: is there such a card, with a group?
             self.container = VfioContainer()
-            self.group = VfioGroup(group_of(bdf), self.container)
+            self.group = VfioGroup(group, self.container)
             self.container.set_iommu()
             self.device = VfioDevice(self.group, bdf)
             self.bars = {bar: self.device.region(VFIO_PCI_BAR0_REGION_INDEX + bar)

@@ -183,7 +183,7 @@ def describe(bdf: str, sysfs: Path = SYSFS_PCI) -> list[str]:
     except VfioError as exc:
         return problems + [exc.strerror]
     others = []
-    for member in sorted((Path("/sys/kernel/iommu_groups") / str(group) / "devices").glob("*")):
+    for member in sorted((dev / "iommu_group").resolve().joinpath("devices").glob("*")):
         d = driver_of(member)
         if member.name != bdf and d not in (None, "vfio-pci", "pci-stub", "pcieport"):
             others.append(f"{member.name} is bound to {d}")
