@@ -63,6 +63,13 @@ class EmulatedPciCard:
     """The card interface over the emulated card.  `lock` is the one the in-process
     command link holds while the DSP runs, so the line and the DMA never interleave."""
 
+    # What a refill through this card costs beyond the host's own latency (the jitter
+    # model) and the transfer itself (dma_time): INTx delivery to the waiting thread
+    # (~5 us), the report read as 10 PIO reads of BAR2 (~1 us each), the register
+    # accesses that reap the chain and start the next (~5 us) and the 16-byte descriptor
+    # fetch: 20 us a block.
+    REFILL_OVERHEAD_S = 20e-6
+
     def __init__(self, printer, lock: threading.Lock | None = None, faults=None,
                  dma_bytes_s: float | None = PCI_BYTES_S):
         self.printer = printer
@@ -274,7 +281,7 @@ class EmulatedPciCard:
             stall = f.pci_bus_stall[1] if f.pci_bus_stall and \
                 self.blocks_moved == f.pci_bus_stall[0] else 0.0
             if self.printer.link_alive:
-                self.printer.data_in(data, delay_s=stall)
+                self.printer.data_in(data, delay_s=self.REFILL_OVERHEAD_S + stall)
             self.dma[P.PLX_DMASIZ0] = 0
             if chained and self.dma[P.PLX_DMAMODE0] & P.DMAMODE_CLEAR_COUNT:
                 self.memory.write(self._desc_address + 8, bytes(4))

@@ -9,6 +9,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import threading
 from pathlib import Path
 from types import SimpleNamespace
@@ -376,3 +377,20 @@ def test_a_bus_stall_without_the_guard_is_the_seeds_fifo_underrun(tmp_path, prof
                                           expect_fail=True)
     assert err.fault == P.Fault.FIFO_UNDERRUN
     assert "underrun" in str(err)
+
+
+def test_cli_print_through_the_emulated_card_equals_cli_rip(tmp_path):
+    """`wideprint print --device emulator-pci`: the media the card's DMA fed equals the
+    planes `wideprint rip` writes, dot for dot."""
+    root = Path(__file__).resolve().parent.parent
+    sample = root / "resources" / "samples" / "sample.tif"
+    exe = [sys.executable, "-m", "wideprint.app.cli"]
+    opts = ["--passes", "2", "--bidir", "--dither", "bayer"]
+    media, planes = tmp_path / "media.tif", tmp_path / "planes.tif"
+    run = subprocess.run(exe + ["print", str(sample), "--device", "emulator-pci",
+                                "--media-out", str(media)] + opts, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    subprocess.run(exe + ["rip", str(sample), "-o", str(planes)] + opts, check=True,
+                   capture_output=True)
+    assert np.array_equal(read_planes(media), read_planes(planes))
+    assert read_planes(media).any()
