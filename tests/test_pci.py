@@ -394,3 +394,38 @@ def test_cli_print_through_the_emulated_card_equals_cli_rip(tmp_path):
                    capture_output=True)
     assert np.array_equal(read_planes(media), read_planes(planes))
     assert read_planes(media).any()
+
+
+# -- the VFIO side's own plumbing, without a card ----------------------------------------------------
+def test_dma_buffers_are_page_aligned_memory_at_the_address_given_to_the_iommu():
+    buf = V.MappedBuffer(5000, 0x1000_0000)
+    try:
+        assert buf.size == 8192 and buf.vaddr % 4096 == 0 and len(buf.mem) == 8192
+        buf.mem[100:104] = b"WPD1"
+        assert ctypes.string_at(buf.vaddr + 100, 4) == b"WPD1"    # what MAP_DMA's vaddr names
+    finally:
+        buf.close()
+
+
+@pytest.mark.parametrize("mmappable", [True, False])
+def test_region_access_by_mmap_or_by_pread(tmp_path, mmappable):
+    """BAR access as VFIO gives it: a region of the device fd at `offset`, mmapped when the
+    region allows it, else pread/pwrite (here a file stands in for the device fd)."""
+    path = tmp_path / "dev"
+    path.write_bytes(bytes(3 * 4096))
+    fd = os.open(path, os.O_RDWR)
+    try:
+        info = V.vfio_region_info(index=2, size=4096, offset=4096,
+                                  flags=V.VFIO_REGION_INFO_FLAG_READ | V.VFIO_REGION_INFO_FLAG_WRITE
+                                  | (V.VFIO_REGION_INFO_FLAG_MMAP if mmappable else 0))
+        region = V.Region(fd, info)
+        assert (region.words is not None) == mmappable
+        region.write(P.FPGA_CTRL, 4, 0x12345678)
+        region.write(P.PCI_CFG_STATUS, 2, 0x2000)
+        assert region.read(P.FPGA_CTRL, 4) == 0x12345678 and region.read(P.PCI_CFG_STATUS, 2) == 0x2000
+        region.close()
+        raw = path.read_bytes()
+        assert raw[4096 + P.FPGA_CTRL:4096 + P.FPGA_CTRL + 4] == bytes.fromhex("78563412")
+        assert raw[4096 + P.PCI_CFG_STATUS:4096 + P.PCI_CFG_STATUS + 2] == bytes.fromhex("0020")
+    finally:
+        os.close(fd)
