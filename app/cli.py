@@ -583,8 +583,20 @@ def cmd_devices(args) -> int:
             print("  none")
     except usb.core.NoBackendError:
         print("  cannot look: libusb-1.0 is not installed (Debian: apt-get install libusb-1.0-0)")
+    from ..driver.vfio import list_plx9054
+    print("PCI cards (PLX 9054, data channel through vfio-pci; docs/pci.md):")
+    cards = list_plx9054()
+    for c in cards:
+        if not c["wideprint"]:
+            print(f"  {c['address']}  a PLX 9054 that is not a wideprint card (subsystem "
+                  f"{c['subsystem']}); usable only as vfio://{c['address']} if it is one")
+            continue
+        state = "ready" if not c["problems"] else "not ready: " + "; ".join(c["problems"])
+        print(f"  vfio://{c['address']}  {state}")
+    if not cards:
+        print("  none")
     nodes = sorted(glob.glob("/dev/wideprint*"))
-    print("PCI card device nodes (data channel):")
+    print("device nodes (data channel):")
     for n in nodes:
         print(f"  {n}")
     if not nodes:

@@ -2,10 +2,13 @@
 
     emulator                      the emulator in-process (tests, demos, acceptance runs)
     emulator-usb                  the same, its data channel through pyusb
+    emulator-pci                  the same, its data channel the PCI card at register level
+                                  (the host's PciData over device_sim.pci_card, docs/pci.md)
     serial=PORT,data=URL[,baud=N] a real printer or a standalone emulator
         PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT (pyserial)
         URL:  usb://VID:PID[/SERIAL]   USB bulk (libusb)
-              /dev/NODE                the PCI card's device node (or a pty stand-in)
+              vfio://BDF               the PCI card through vfio-pci (docs/pci.md)
+              /dev/NODE                a device node (or a pty stand-in)
               tcp://HOST:PORT          the standalone emulator's data port
               usb-emu://HOST:PORT      the standalone emulator as a USB device (pyusb)
 
@@ -22,11 +25,12 @@ if TYPE_CHECKING:          # imported when a device is opened: `--help` stays li
     from ..driver.device import Device
     from ..rip.profile import Profile
 
-EMULATOR_SPECS = ("emulator", "emulator-usb")
+EMULATOR_SPECS = ("emulator", "emulator-usb", "emulator-pci")
 DEVICE_HELP = ("the printer: emulator (in-process), emulator-usb (in-process, data through "
-               "pyusb), or serial=PORT,data=URL[,baud=N] with PORT a tty, pty or "
-               "socket://HOST:PORT and URL usb://VID:PID[/SERIAL], /dev/NODE (the PCI card), "
-               "tcp://HOST:PORT or usb-emu://HOST:PORT (docs/driver.md)")
+               "pyusb), emulator-pci (in-process, data through the emulated PCI card), or "
+               "serial=PORT,data=URL[,baud=N] with PORT a tty, pty or socket://HOST:PORT and URL "
+               "usb://VID:PID[/SERIAL], vfio://BDF (the PCI card), /dev/NODE, tcp://HOST:PORT "
+               "or usb-emu://HOST:PORT (docs/driver.md)")
 
 
 def is_emulator_spec(spec: str) -> bool:
@@ -69,11 +73,16 @@ def open_device(spec: str, profile: "Profile", faults=None, media_path=None, eve
         if live is not None:
             printer.live = live
         port, data = in_process(printer)
+        lock = data.lock
         if wrap is not None:
             port, data = wrap(port, data, printer)
         if spec == "emulator-usb":
             from ..device_sim.usb_backend import EmulatorUsbBackend
             data = UsbData(backend=EmulatorUsbBackend(data))
+        elif spec == "emulator-pci":
+            from ..device_sim.pci_card import EmulatedPciCard
+            from ..driver.transport import PciData
+            data = PciData(EmulatedPciCard(printer, lock))
         link = CommandLink(port, profile.link.response_timeout_s)
         return Device(link, data, profile, emulator=printer, timing=Timing.synchronous())
     if emulator_options.get("scan_path"):

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from . import api
+from .devices import is_emulator_spec
 
 _RUNNING: list = []                  # the running test's request (diff images go beside it)
 
@@ -42,7 +43,7 @@ def pytest_configure(config):
 
 def pytest_runtest_setup(item):
     if item.get_closest_marker("emulator_only") and \
-            item.config.getoption("--wideprint-device") not in ("emulator", "emulator-usb"):
+            not is_emulator_spec(item.config.getoption("--wideprint-device")):
         pytest.skip("needs the emulator (--wideprint-device is a real printer)")
 
 
@@ -72,7 +73,7 @@ def wideprint_printer(wideprint_device, wideprint_profile, tmp_path):
     made = []
 
     def make(faults=None, profile=None, **kw):
-        if faults and wideprint_device not in ("emulator", "emulator-usb"):
+        if faults and not is_emulator_spec(wideprint_device):
             pytest.skip("fault injection needs the emulator")
         p = api.EmulatedPrinter(profile or wideprint_profile, faults=faults,
                                 device=wideprint_device, workdir=tmp_path / f"printer-{len(made) + 1}", **kw)

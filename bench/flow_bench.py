@@ -1,6 +1,8 @@
 """Flow control: the fastest carriage speed that prints with zero FIFO underruns under the
 emulator's host-jitter model (docs/emulator.md), with the seed's 256-word FIFOs, and the
-same job at 660 mm/s with an on-card pass buffer (issue 5).
+same job at 660 mm/s with an on-card pass buffer (issue 5); each speed through the
+in-process data channel (`emulator`) and through the PCI card modelled at register level
+(`emulator-pci`: the host's PciData driving the 9054's chained demand-mode DMA, issue 19).
 
 Each run prints full-width 300 dpi strokes (a 1-pass job); a "starve" is a trigger that
 found a FIFO empty (with the starve guard on the line pauses and resumes, so we can count
@@ -37,9 +39,9 @@ def profile_with(tmp: Path, **fpga) -> object:
     return load_profile(path)
 
 
-def run(profile, job_planes, speed, jitter, seed):
+def run(profile, job_planes, speed, jitter, seed, device="emulator"):
     job = Ripped("flow", job_planes, RipSettings(dpi=300, passes=1), profile)
-    dev = open_device("emulator", profile, Faults(host_jitter=jitter, seed=seed))
+    dev = open_device(device, profile, Faults(host_jitter=jitter, seed=seed))
     t = time.perf_counter()
     PrintJob(dev, job, speed_mm_s=speed).run()
     wall = time.perf_counter() - t
@@ -49,6 +51,7 @@ def run(profile, job_planes, speed, jitter, seed):
     levels = [e["min_fifo_words"] for e in lines if e["min_fifo_words"] is not None]
     min_fifo = min(levels) if levels else None      # None: the whole stroke was preloaded
     emu.close()
+    dev.data.close()
     return starves, min_fifo, wall
 
 
@@ -68,17 +71,23 @@ def main() -> None:
           f"'{args.jitter}', {args.seeds} seeds per point")
     print(f"FIFO {base.fifo_words} words/head, DMA ring {base.ring_blocks} blocks of "
           f"{base.block_fires} fires")
-    best = 0
-    print(f"{'speed mm/s':>10} {'fire Hz':>8} {'starves':>8} {'min FIFO words':>15}")
+    devices = ("emulator", "emulator-pci")
+    best = dict.fromkeys(devices, 0)
+    print(f"{'speed mm/s':>10} {'fire Hz':>8}" + "".join(
+        f" {d + ' starves':>20} {'min FIFO words':>15} {'wall s':>7}" for d in devices))
     for v in speeds:
-        total, low = 0, 10 ** 9
-        for seed in range(1, args.seeds + 1):
-            s, m, _ = run(base, planes, v, args.jitter, seed)
-            total, low = total + s, min(low, m if m is not None else low)
-        print(f"{v:>10} {v / 25.4 * 300:>8.0f} {total:>8} {low:>15}")
-        if total == 0:
-            best = v
-    print(f"fastest speed with zero underruns (256-word FIFOs): {best} mm/s")
+        row = f"{v:>10} {v / 25.4 * 300:>8.0f}"
+        for d in devices:
+            total, low, wall = 0, 10 ** 9, 0.0
+            for seed in range(1, args.seeds + 1):
+                s, m, w = run(base, planes, v, args.jitter, seed, d)
+                total, low, wall = total + s, min(low, m if m is not None else low), wall + w
+            row += f" {total:>20} {low:>15} {wall:>7.1f}"
+            if total == 0:
+                best[d] = v
+        print(row)
+    for d in devices:
+        print(f"fastest speed with zero underruns (256-word FIFOs), {d}: {best[d]} mm/s")
     with tempfile.TemporaryDirectory() as tmp:
         words = (width + 4200) * 8
         prof = profile_with(Path(tmp), pass_buffer_words=words)

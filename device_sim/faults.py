@@ -33,6 +33,10 @@ KINDS = {
     "scan-noise": "scan: sensor noise, sigma in 8-bit levels (default 1.5)",
     "scan-blur": "scan: optics blur, Gaussian sigma (default 10um)",
     "scan-mode": "scan: rgb (default) or grey",
+    "pci-desc-error": "PCI card: the N-th DMA descriptor fetch is a master abort (docs/pci.md 8)",
+    "pci-dma-abort": "PCI card: the N-th block's DMA is aborted half-way (master abort)",
+    "pci-irq-miss": "PCI card: each interrupt is lost with this probability",
+    "pci-bus-stall": "PCI card: N:SECONDS: the N-th block's DMA is held off that long",
     "seed": "random seed for the injected faults and the scanner's noise",
 }
 
@@ -101,6 +105,10 @@ class Faults:
     scan_noise: float = 1.5                              # 8-bit levels
     scan_blur: Length = Length(10.0)
     scan_mode: str = "rgb"
+    pci_desc_error: int | None = None
+    pci_dma_abort: int | None = None
+    pci_irq_miss: float = 0.0
+    pci_bus_stall: tuple | None = None                   # (block number, seconds)
     seed: int = 1
 
     @classmethod
@@ -150,7 +158,10 @@ class Faults:
                     if value not in ("rgb", "grey", "gray"):
                         raise ValueError(value)
                     f.scan_mode = "grey" if value == "gray" else value
-                elif attr in ("data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
+                elif attr == "pci_bus_stall":
+                    n, sec = value.split(":")
+                    f.pci_bus_stall = (int(n), float(sec))
+                elif attr in ("pci_desc_error", "pci_dma_abort", "data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
                               "seed", "starve_guard"):
                     setattr(f, attr, int(float(value)))
                 else:

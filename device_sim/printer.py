@@ -173,7 +173,9 @@ class Printer:
         return self._noise(self.dsp.receive(data, gap))
 
     # -- data channel -----------------------------------------------------------------------
-    def data_in(self, data: bytes) -> None:
+    def data_in(self, data: bytes, delay_s: float = 0.0) -> None:
+        """Data-channel bytes; `delay_s`: the bus held their DMA off that much longer
+        than the host's refill latency (the PCI card's injected bus stall)."""
         try:
             blocks = self.block_decoder.feed(data)
         except P.BlockError as exc:
@@ -189,6 +191,7 @@ class Printer:
                     ready = self.time
                 else:
                     ready = self._move_times[idx - self.fpga.ring_blocks] + self.host_latency()
+                ready += delay_s
             else:
                 ready = self.time
             fault = self.fpga.accept(block, ready)

@@ -8,7 +8,8 @@ in app/devices.py; the driver only knows the links and what timing a device need
     serial=PORT,data=URL[,baud=N] a real or standalone-emulated printer
         PORT: /dev/ttyS0, /dev/ttyUSB0, /dev/pts/N, or socket://HOST:PORT (pyserial)
         URL:  usb://VID:PID[/SERIAL]   USB bulk (libusb)
-              /dev/NODE                the PCI card's device node (or a pty stand-in)
+              vfio://BDF               the PCI card through vfio-pci (docs/pci.md); pci://BDF
+              /dev/NODE                a device node (or a pty stand-in)
               tcp://HOST:PORT          the standalone emulator's data port
 """
 
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 
 from . import protocol as P
 from .link import CommandLink, LinkError
-from .transport import NodeData, TcpData, UsbData
+from .transport import NodeData, PciData, TcpData, UsbData
 from ..rip.profile import Profile
 
 
@@ -107,19 +108,34 @@ def open_data(url: str):
             ids, _, serial = url[6:].partition("/")
             vid, _, pid = ids.partition(":")
             return UsbData(int(vid, 16), int(pid, 16), serial or None)
+        if url.startswith(("vfio://", "pci://")):
+            from .pci_card import VfioCard
+            return PciData(VfioCard(pci_address(url.partition("://")[2])))
         if url.startswith("/"):
             return NodeData(url)
     except (OSError, ConnectionError) as exc:
         raise LinkError(f"cannot open data channel {url}: {exc}") from None
-    raise ValueError(f"data channel {url!r}: use usb://VID:PID[/SERIAL], /dev/NODE or "
-                     f"tcp://HOST:PORT")
+    raise ValueError(f"data channel {url!r}: use usb://VID:PID[/SERIAL], vfio://BDF, /dev/NODE "
+                     f"or tcp://HOST:PORT")
+
+
+def pci_address(text: str) -> str:
+    """'0000:03:00.0' or '03:00.0' (domain 0) -> the full address sysfs and VFIO use."""
+    import re
+    t = text.strip().lower()
+    if re.fullmatch(r"[0-9a-f]{2}:[0-9a-f]{2}\.[0-7]", t):
+        t = "0000:" + t
+    if not re.fullmatch(r"[0-9a-f]{4}:[0-9a-f]{2}:[0-9a-f]{2}\.[0-7]", t):
+        raise ValueError(f"PCI address {text!r}: use DOMAIN:BUS:DEVICE.FUNCTION, e.g. "
+                         f"0000:03:00.0 (lspci -D)")
+    return t
 
 
 def parse_link_spec(spec: str) -> dict:
     """'serial=PORT,data=URL[,baud=N]' -> its parts; ValueError saying what is missing."""
     parts = dict(p.split("=", 1) for p in spec.split(",") if "=" in p)
     if "serial" not in parts or "data" not in parts:
-        raise ValueError(f"device spec {spec!r}: use 'emulator', 'emulator-usb' or "
+        raise ValueError(f"device spec {spec!r}: use 'emulator', 'emulator-usb', 'emulator-pci' or "
                          f"'serial=PORT,data=URL' (docs/driver.md)")
     return parts
 

@@ -684,3 +684,101 @@ def words_to_nozzles(words: np.ndarray) -> np.ndarray:
     """uint16 (..., 8) -> uint8 (..., 128) nozzle bits."""
     w = np.ascontiguousarray(words, dtype="<u2")
     return np.unpackbits(w.view(np.uint8), axis=-1, bitorder="little")
+
+
+# -- the PCI card: PLX PCI 9054 bridge + FPGA on its local bus (docs/pci.md) ----------------------
+# Identity (docs/pci.md 1): the bridge's own IDs, the project's subsystem IDs.
+PCI_VENDOR_PLX = 0x10B5
+PCI_DEVICE_9054 = 0x9054
+PCI_SUBVENDOR = USB_VID
+PCI_SUBDEVICE = USB_PID
+BAR_PLX = 0                     # the 9054's local configuration / runtime registers
+BAR_FPGA = 2                    # local address space 0: the FPGA
+# PCI configuration space
+PCI_CFG_VENDOR = 0x00
+PCI_CFG_COMMAND = 0x04
+PCI_CFG_STATUS = 0x06
+PCI_CFG_SUBVENDOR = 0x2C
+PCI_CFG_SUBDEVICE = 0x2E
+PCI_COMMAND_MEMORY = 1 << 1
+PCI_COMMAND_MASTER = 1 << 2
+PCI_STATUS_TARGET_ABORT = 1 << 12   # received target abort (W1C)
+PCI_STATUS_MASTER_ABORT = 1 << 13   # received master abort (W1C)
+# 9054 registers, BAR0 offsets (PCI 9054 data book; Linux drivers/comedi/drivers/plx9080.h)
+PLX_INTCSR = 0x68
+PLX_CNTRL = 0x6C
+PLX_PCIHIDR = 0x70
+PLX_PCIHIDR_9054 = 0x905410B5
+PLX_DMAMODE0 = 0x80
+PLX_DMAPADR0 = 0x84
+PLX_DMALADR0 = 0x88
+PLX_DMASIZ0 = 0x8C
+PLX_DMADPR0 = 0x90
+PLX_DMACSR0 = 0xA8              # 8 bits; 0xA9 is DMACSR1 (channel 1, unused: written 0)
+INTCSR_PCI_IE = 1 << 8
+INTCSR_ABORT_IE = 1 << 10
+INTCSR_LOCAL_IE = 1 << 11
+INTCSR_ABORT_ACTIVE = 1 << 14
+INTCSR_LOCAL_ACTIVE = 1 << 15
+INTCSR_DMA0_IE = 1 << 18
+INTCSR_DMA0_ACTIVE = 1 << 21
+INTCSR_ABORT_NOT_DMA0 = 1 << 25
+INTCSR_HOST = INTCSR_PCI_IE | INTCSR_ABORT_IE | INTCSR_LOCAL_IE | INTCSR_DMA0_IE
+DMAMODE_WIDTH32 = 3
+DMAMODE_READY_IE = 1 << 6
+DMAMODE_BURST = 1 << 8
+DMAMODE_CHAIN = 1 << 9
+DMAMODE_DONE_IE = 1 << 10
+DMAMODE_LOCAL_CONST = 1 << 11
+DMAMODE_DEMAND = 1 << 12
+DMAMODE_CLEAR_COUNT = 1 << 16
+DMAMODE_INT_PCI = 1 << 17
+DMAMODE_BLOCK = (DMAMODE_WIDTH32 | DMAMODE_READY_IE | DMAMODE_BURST | DMAMODE_DONE_IE
+                 | DMAMODE_LOCAL_CONST | DMAMODE_DEMAND | DMAMODE_CLEAR_COUNT | DMAMODE_INT_PCI)
+DMAMODE_CHAINED = DMAMODE_BLOCK | DMAMODE_CHAIN               # 0x00031F43
+DPR_PCI = 1 << 0                # the next descriptor is in PCI (host) memory
+DPR_END = 1 << 1                # end of chain
+DPR_TC_INT = 1 << 2             # interrupt when this descriptor is done
+DPR_TO_PCI = 1 << 3             # direction local -> PCI (ours: 0, PCI -> local)
+DPR_NEXT_MASK = 0xFFFFFFF0
+DMASIZ_MASK = 0x7FFFFF
+DMACSR_ENABLE = 1 << 0
+DMACSR_START = 1 << 1
+DMACSR_ABORT = 1 << 2
+DMACSR_CLEAR_INT = 1 << 3
+DMACSR_DONE = 1 << 4
+# The FPGA, BAR2 offsets = local addresses (docs/pci.md 2)
+FPGA_ID = 0x000
+FPGA_ID_VALUE = 0x31435057      # "WPC1"
+FPGA_VERSION = 0x004
+FPGA_HEADS = 0x008
+FPGA_FIFO_WORDS = 0x00C
+FPGA_RING_SLOTS = 0x010
+FPGA_CTRL = 0x020
+FPGA_IRQ_STATUS = 0x024
+FPGA_IRQ_MASK = 0x028
+FPGA_REPORT_COUNT = 0x030
+FPGA_REPORT_DATA = 0x034
+FPGA_FIFO_LEVEL0 = 0x040
+FPGA_FIFO_FLAGS0 = 0x060
+FPGA_RING_FREE = 0x080
+FPGA_STROKE = 0x084
+FPGA_BLOCKS_MOVED = 0x088
+FPGA_FIRES_DONE = 0x08C
+FPGA_DATA = 0x1000              # the DMA's destination, at a constant local address
+FPGA_BAR_SIZE = 0x2000
+CTRL_DATA_RESET = 1 << 0
+CTRL_IRQ_EN = 1 << 1
+IRQ_REPORT = 1 << 0
+IRQ_DREQ = 1 << 1
+IRQ_FAULT = 1 << 2
+DMA_DESC = struct.Struct("<IIII")   # PCI address, local address, size, next | DPR bits
+DmaDesc = namedtuple("DmaDesc", "padr ladr size dpr")
+
+
+def encode_dma_desc(padr: int, ladr: int, size: int, dpr: int) -> bytes:
+    return DMA_DESC.pack(padr, ladr, size, dpr)
+
+
+def decode_dma_desc(data) -> DmaDesc:
+    return DmaDesc(*DMA_DESC.unpack(bytes(data[:DMA_DESC.size])))

@@ -44,8 +44,16 @@ class StrokeStreamer:
     def done(self) -> bool:
         return self.sent == len(self.blocks)
 
+    def _recv(self, timeout: float) -> bytes:
+        """The reports that arrived; a link that failed while reading them is a lost data
+        link the job recovers from, as when sending (the PCI card finds a DMA abort here)."""
+        try:
+            return self.data.recv(timeout)
+        except (ConnectionError, OSError) as exc:
+            raise StreamError(f"stroke {self.stroke}: data link lost ({exc})") from exc
+
     def _reports(self, timeout: float) -> None:
-        for rep in self.decoder.feed(self.data.recv(timeout)):
+        for rep in self.decoder.feed(self._recv(timeout)):
             if rep.stroke != self.stroke:
                 continue
             self.acked = max(self.acked, rep.blocks)
@@ -76,7 +84,7 @@ class StrokeStreamer:
             raise StreamError(f"stroke {self.stroke}: data link lost ({exc})") from exc
         deadline = time.monotonic() + timeout
         while True:
-            for rep in self.decoder.feed(self.data.recv(0.02)):
+            for rep in self.decoder.feed(self._recv(0.02)):
                 if rep.stroke == self.stroke and rep.flags & P.REPORT_FLUSHED:
                     self.sent = self.acked = rep.blocks
                     return
