@@ -169,3 +169,16 @@ def _cycles() -> list[set[str]]:
 def test_no_device_sim_module_is_in_an_import_cycle():
     sim = set(in_folder("device_sim"))
     assert [c for c in _cycles() if c & sim] == []
+
+
+def test_the_gui_is_a_client_and_opens_no_device():
+    """docs/architecture.md, "One server, many front ends": the GUI reaches printers only
+    through the print server; it imports neither the driver nor the emulator nor the
+    device composer nor the server's insides (only where a server keeps its state, as
+    every client does), so it can never take a printer from the server."""
+    bad = {m: {x for x in own(m) if x.split(".")[0] in ("driver", "device_sim")
+               or x in ("app.devices", "app.livemedia")
+               or (x.startswith("app.server.") and x != "app.server.config")}
+           for m in in_folder("app.gui")}
+    assert {m: b for m, b in bad.items() if b} == {}
+    assert in_folder("app.gui")                      # the check saw the GUI's modules
