@@ -606,6 +606,7 @@ class LayoutJob(PrintableJob):
             return free.pop()
         from .pipeline import RipJob
         job = RipJob(item.path, item_settings(self.settings, item.turn), self.profile)
+        job.compensate_dead = False          # the sheet's rows are compensated, not the item's
         self._open.append(job)
         if item.crop is not None:
             job.source = _Crop(job.source, item.crop)

@@ -189,8 +189,53 @@ class RipJob(PrintableJob):
                          output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
                          curves=profile_curves(self.profile))
 
+    def _dead_rows(self):
+        """(per colour the dead row phases, their period) when the weave leaves rows only
+        dead nozzles print (one pass): the RIP gives those rows' dots to their neighbours
+        (rip/deadrows.py); None when every row has a live nozzle.  ValueError when a dead
+        row's neighbour is dead too."""
+        if not hasattr(self, "_dead_cache"):
+            s = self.settings
+            self._dead_cache = None
+            # a layout's items are compensated as the sheet (its rows), not each alone
+            if self.profile.dead_nozzles and getattr(self, "compensate_dead", True) and \
+                    not getattr(self.source, "prescreened", False):
+                planner = StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes,
+                                        s.bidir, s.pass_mask, dead_rows_empty=True)
+                dead = planner.dead_row_phases()
+                if any(d.size for d in dead):
+                    from .deadrows import check_neighbours
+
+                    def name(c, phase):
+                        h, z = planner._slot_table_dead(c, int(phase) + planner.s0)
+                        return f"{self.profile.heads[h].name}:{z}" if h >= 0 else f"row {phase}"
+                    check_neighbours(dead, planner.advance, name)
+                    self._dead_cache = (dead, planner.advance)
+        return self._dead_cache
+
+    def planner(self) -> StrokePlanner:
+        s = self.settings
+        return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
+                             s.pass_mask, dead_rows_empty=self._dead_rows() is not None)
+
     def halftone_bands(self) -> Iterator[np.ndarray]:
-        """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands."""
+        """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands (rows only dead
+        nozzles print given to their neighbours: rip/deadrows.py)."""
+        dead = self._dead_rows()
+        if dead is None:
+            yield from self._halftone_bands()
+            return
+        from .deadrows import compensate
+        yield from compensate(self._halftone_bands(), *dead)
+
+    def packed_bands(self) -> Iterator[np.ndarray]:
+        if self._dead_rows() is None:
+            yield from self._packed_bands()
+            return
+        for band in self.halftone_bands():
+            yield pack_dots(band)
+
+    def _halftone_bands(self) -> Iterator[np.ndarray]:
         if self.layout is not None:
             yield from self.layout.halftone_bands()
             return
@@ -198,7 +243,7 @@ class RipJob(PrintableJob):
             yield from self.source.bands(self.band_rows)
             return
         if self.settings.dither in ORDERED:
-            for bits in self.packed_bands():
+            for bits in self._packed_bands():
                 yield unpack_dots(bits, self.width)
             return
         sep = self._separator()
@@ -210,9 +255,11 @@ class RipJob(PrintableJob):
             yield ht.process(cmyk)
 
     def packed_native(self) -> bool:
+        if self._dead_rows() is not None:
+            return False
         return self.settings.dither in ORDERED or getattr(self.source, "prescreened", False)
 
-    def packed_bands(self) -> Iterator[np.ndarray]:
+    def _packed_bands(self) -> Iterator[np.ndarray]:
         """The halftone as packed bits (h, 4, ceil(W / 8)).  Ordered methods take the fused
         path (rip/screen.py): no CMYK or dot planes are made, and loading plus screening the
         next bands (on both cores) overlaps the stroke packing of this one."""
@@ -224,7 +271,8 @@ class RipJob(PrintableJob):
             yield from prefetch(prescreened_packed(self.source, self.band_rows), depth=1)
             return
         if s.dither not in ORDERED:
-            yield from super().packed_bands()
+            for band in self._halftone_bands():
+                yield pack_dots(band)
             return
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
         # three stages: libvips reads band k+2 while both cores screen band k+1 and

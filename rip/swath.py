@@ -54,7 +54,7 @@ class StrokePlanner:
     """Plans the carriage strokes of a job from the weave's passes (N = `passes`)."""
 
     def __init__(self, profile: Profile, width: int, height: int, dpi: int, passes: int = 1,
-                 bidir: bool = False, mask: str = "checker"):
+                 bidir: bool = False, mask: str = "checker", dead_rows_empty: bool = False):
         if passes not in PASS_COUNTS:
             raise ValueError(f"passes must be one of {PASS_COUNTS}, not {passes}")
         if mask not in PASS_MASKS:
@@ -70,6 +70,10 @@ class StrokePlanner:
             raise ProfileError(f"{profile.path}: too few usable nozzles for {passes} passes")
         self.total_strokes = -(-height // self.advance) + passes - 1
         self._slot_table = profile.slot_table()
+        # dead_rows_empty: the halftone has no dots in rows only dead nozzles print (the
+        # RIP moved them to the neighbour rows: rip/deadrows.py), so those rows need no
+        # live nozzle
+        self._dead_rows_empty = dead_rows_empty
         self._remap = self._dead_nozzle_remap()
         self.mask = mask
         self._qmask, self._sel = self._pass_mask(mask)
@@ -118,6 +122,9 @@ class StrokePlanner:
         for c in range(len(COLORS)):
             for r in range(a):
                 live = np.flatnonzero(alive[c, r])
+                if live.size == 0 and self._dead_rows_empty:
+                    remap[c, r] = np.arange(n)       # no dots there: nothing to remap
+                    continue
                 if live.size == 0:
                     dead = [f"{self.profile.heads[h].name}:{z}" for h, z in
                             (tuple(self._slot_table_dead(c, int(s))) for s in slots[r])]
@@ -129,6 +136,16 @@ class StrokePlanner:
                     later = live[live >= jj]
                     remap[c, r, jj] = later[0] if later.size else live[0]
         return remap
+
+    def dead_row_phases(self) -> list[np.ndarray]:
+        """Per colour, the row phases r mod A that no live nozzle prints in any pass of the
+        weave (only with 1 pass, or dead nozzles lined up across every pass)."""
+        n, a = self.n, self.advance
+        rho = np.arange(a)[:, None]
+        j = np.arange(n)[None, :]
+        slots = rho + (n - 1 - j) * a + self.s0
+        alive = self._slot_table[:, slots, 0] >= 0                    # (4, A, N)
+        return [np.flatnonzero(~alive[c].any(axis=1)) for c in range(len(COLORS))]
 
     def _slot_table_dead(self, c: int, slot: int) -> tuple[int, int]:
         for h in self.profile.heads:

@@ -204,17 +204,18 @@ def test_position_off_the_paper_is_refused_before_printing(tmp_path, profile, al
         dev.emulator.close()
 
 
-def test_one_pass_job_that_dead_nozzles_make_unprintable_fails_before_anything_moves(tmp_path):
-    """The planner's refusal is the job's failure (the CLI and the server go on with the
-    next job), and it comes before the printer is touched."""
+def test_one_pass_job_with_dead_nozzles_on_neighbouring_rows_fails_before_anything_moves(tmp_path):
+    """One pass gives a dead row's dots to its neighbours (rip/deadrows.py); when a
+    neighbour row is dead too, the planner's refusal is the job's failure, before the
+    printer is touched (the CLI and the server go on with the next job)."""
     from test_swath import variant_profile
-    prof = variant_profile(tmp_path, dead=[("M1", 57)])
+    prof = variant_profile(tmp_path, dead=[("M1", 57), ("M2", 57)])      # slots 114, 115
     src = write_cmyk_tiff(tmp_path / "one.tif", random_planes(60, 50, seed=4))
     dev = open_device("emulator", prof, None, media_path=str(tmp_path / "m.tif"))
     try:
         job = PrintJob(dev, RipJob(str(src), RipSettings(placement=PX, passes=1), prof))
-        with pytest.raises(JobError, match=r"one.tif: .*dead nozzles M1:57 leave colour M rows "
-                                           r"unprintable with 1 pass\(es\); use more passes"):
+        with pytest.raises(JobError, match=r"one.tif: dead nozzles on neighbouring rows of colour "
+                                           r"M \(M1:57, M2:57\): one pass cannot print around them"):
             job.run()
         assert job.report.state == "failed"
         assert not dev.emulator.homed and dev.emulator.blocks_total == 0
