@@ -473,6 +473,8 @@ def cmd_test_print(args) -> int:
     try:
         _check_scan(args)
         profile = _profile(args)
+        if args.thesis:
+            profile = _thesis_line(args, profile)
         faults = Faults.parse(args.inject)
         k = profile.k(args.dpi)
         width = int(round(args.width_mm / 25.4 * profile.counts_per_inch / k))
@@ -498,12 +500,38 @@ def cmd_test_print(args) -> int:
         print(f"{args.pattern}: printed {rep.strokes_printed} strokes, {job.width} x {job.height} dots"
               + (f" -> {args.media_out}" if args.media_out else "")
               + (f", scan {args.scan_out}" if args.scan_out else ""))
+        if args.thesis and dev.emulator is not None:
+            for e in (e for e in dev.emulator.events if e.get("event") == "line"):
+                print(f"thesis line, stroke {e['stroke']}: servo every {e['servo_period_s'] * 1e3:g} ms; "
+                      f"max following error {e['max_following_error']:.2f} counts, final "
+                      f"position error {e['final_error']:+.2f} counts, peak current "
+                      f"{e['peak_current_a']:.3f} A; {e['fired']} of {e['fires']} columns fired")
         return EXIT_OK
     except JobError as exc:
         print(f"{args.pattern}: FAILED: {exc}", file=sys.stderr)
         return EXIT_JOB_FAILED
     finally:
         _close_device(dev, args)
+
+
+THESIS_COUNTS, THESIS_RAMP_COUNTS, THESIS_SPEED_MM_S, THESIS_PERIOD_S = 20_000, 2_000, 100.0, 0.05
+
+
+def _thesis_line(args, profile):
+    """The thesis' test line (seed 000 3.3.1, docs/motion.md "Reproduced: the thesis' test
+    line"): 150 dpi, 20,000 counts firing at 100 mm/s between 2,000-count ramps (so the
+    acceleration is v² / (2 x 2,000 counts) = 59.1 mm/s²), the DSP loop at 50 ms."""
+    from dataclasses import replace
+    if args.pattern not in ("line", "sawtooth"):
+        raise ValueError("--thesis goes with the line or sawtooth pattern (the thesis' tests 1 and 2)")
+    cpi = profile.counts_per_inch
+    ramp_mm = THESIS_RAMP_COUNTS / cpi * 25.4
+    args.dpi = 150
+    args.speed = THESIS_SPEED_MM_S
+    args.width_mm = THESIS_COUNTS / cpi * 25.4
+    carriage = replace(profile.carriage, accel_mm_s2=THESIS_SPEED_MM_S ** 2 / (2 * ramp_mm),
+                       servo_period_s=THESIS_PERIOD_S)
+    return replace(profile, carriage=carriage)
 
 
 def cmd_emulator(args) -> int:
@@ -725,6 +753,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dpi", type=int, choices=setting("dpi").choices, default=150,
                    help="resolution of the pattern (default 150, the thesis' test mode)")
     p.add_argument("--speed", type=float, metavar="MM_S", help="carriage speed (default: profile)")
+    p.add_argument("--thesis", action="store_true",
+                   help="the thesis' test line (seed 000, docs/motion.md): 150 dpi, 24,000 "
+                        "encoder counts (2,000 accelerating, 20,000 at 100 mm/s, 2,000 braking), "
+                        "the DSP's loop at 50 ms; prints the servo's measurements")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE")
     p.add_argument("--event-log", metavar="JSONL")
     p.add_argument("--profile", metavar="TOML")

@@ -161,14 +161,17 @@ class Fpga:
 
     def fifo_flags(self) -> int:
         """EMPTY, ALMOST_EMPTY, FULL and WR_COUNT[1:0] of a head's FIFO (seed 4.2.2), and
-        the DMA request they make together: room for one more block."""
+        the DMA request they make together: room for one more block; LOW, the programmable
+        level (docs/protocol.md, FIFO_FLAGS)."""
         depth = self.fifo_words + self.pass_buffer_words
         level = self.fifo_level_words()
         flags = 0
         if level == 0:
             flags |= P.FIFO_EMPTY
-        if level <= self.almost_empty_words:
+        if level <= P.WORDS_PER_FIRE:          # seed 4.2.2: the next read empties it
             flags |= P.FIFO_ALMOST_EMPTY
+        if level <= self.almost_empty_words:    # the programmable level (extension)
+            flags |= P.FIFO_LOW
         if level >= depth:
             flags |= P.FIFO_FULL
         flags |= min(3, level * 4 // depth) << P.FIFO_WR_COUNT_SHIFT

@@ -250,7 +250,8 @@ class LineRun:
             add_fire(pr.vcd, name, int(self.t_fire[idx[i]] * 1e9), bits, self.forward, period)
         c0, c1 = int(self.columns[idx[sel[0]]]) * self.k, int(self.columns[idx[sel[-1]]]) * self.k
         step = 1 if c1 >= c0 else -1
-        counts = np.arange(c0, c1 + step, step)
+        # from the count before the first fire's: its trigger edge is in the trace
+        counts = np.arange(c0 - step, c1 + step, step)
         times = self.t_seg + self.move.time_at(counts)
         add_encoder(pr.vcd, counts, (times * 1e9).astype(np.int64))
 
@@ -268,6 +269,12 @@ class LineRun:
             column = int(self.columns[fired]) if fired < self.n else int(self.columns[-1])
             pr.raise_fault(fault, head=head, stroke=self.stroke, column=column)
             pr.carriage_stop(pos, t)
+        tr = self.move.traj
         pr.log("line", stroke=self.stroke, forward=self.forward, first_column=int(self.first),
                fires=int(self.n), fired=int(fired), fault=fault.name, pauses=self.pauses,
-               min_fifo_words=None if self.min_level is None else self.min_level * P.WORDS_PER_FIRE)
+               min_fifo_words=None if self.min_level is None else self.min_level * P.WORDS_PER_FIRE,
+               # the servo's run (docs/motion.md): what the thesis' test line measures
+               max_following_error=round(float(tr.max_following_error), 3),
+               final_error=round(float(self.move.final - self.move.end), 3),
+               peak_current_a=round(float(tr.peak_current), 4),
+               servo_period_s=pr.servo.period_s)

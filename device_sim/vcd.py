@@ -129,11 +129,14 @@ def add_fire(vcd: Vcd, head: str, t_ns: int, serial_bits: np.ndarray, forward: b
 
 
 def add_encoder(vcd: Vcd, counts: np.ndarray, times_ns: np.ndarray) -> None:
-    """Quadrature A/B for the carriage passing these counts at these times (x4 decoding:
-    count c has A = bit1 of (c+1)... the standard Gray sequence 00, 01, 11, 10)."""
+    """Quadrature A/B for the carriage passing these counts at these times (x4 decoding,
+    the Gray sequence (A, B) = 10, 11, 01, 00 for counts 0, 1, 2, 3 mod 4), phased so the
+    edges docs/protocol.md names are the ones that fire: count 4n is entered forward on a
+    rising edge of A (150 dpi), count 2n on an edge of A (300 dpi: both edges), every
+    count on an edge of A or B (600 dpi)."""
     a, b = vcd.signal("encoder_A", 1, "encoder"), vcd.signal("encoder_B", 1, "encoder")
     cnt = vcd.signal("qep_count", 32, "encoder")
-    gray = ((0, 0), (1, 0), (1, 1), (0, 1))
+    gray = ((1, 0), (1, 1), (0, 1), (0, 0))
     for c, t in zip(counts, times_ns):
         va, vb = gray[int(c) % 4]
         vcd.set(int(t), a, va)

@@ -179,10 +179,11 @@ REG_FIRE_DELAY_REV0 = 0x8030  # .. 0x8037: the same in reverse lines (docs/calib
 FIRE_DELAY_HZ = 7_500_000     # the FPGA clock the delays count
 
 FIFO_EMPTY = 1 << 0
-FIFO_ALMOST_EMPTY = 1 << 1
+FIFO_ALMOST_EMPTY = 1 << 1  # the seed's: the next read (one fire's words) empties the FIFO
 FIFO_FULL = 1 << 2
 FIFO_WR_COUNT_SHIFT = 3   # bits 3..4: WR_COUNT[1:0], the level in quarters of the depth
 FIFO_DREQ = 1 << 5        # DMA request: room for one more block
+FIFO_LOW = 1 << 6         # extension: level <= the profile's almost_empty_words (programmable)
 
 DPI_CODE = {150: 0x0000, 600: 0x0001, 300: 0x0002}
 DPI_FROM_CODE = {v: k for k, v in DPI_CODE.items()}

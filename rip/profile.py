@@ -573,7 +573,7 @@ class FeedSection(_Section):
 class FpgaSection(_Section):
     fifo_words: int = _key(_Num(True, gt=0, multiple=WORDS_PER_FIRE),
                            doc="FIFO depth per head, 16-bit words")
-    almost_empty_words: int = _key(_Num(True, ge=0), 64, doc="FIFO flag level; < fifo_words")
+    almost_empty_words: int = _key(_Num(True, ge=0), 64, doc="the FIFO_FLAGS LOW level (programmable; the seed's ALMOST_EMPTY is one fire from empty); < fifo_words")
     pass_buffer_words: int = _key(_Num(True, ge=0), 0,
                                   doc="on-card pass buffer per head (0: FIFO only)")
     dma_ring_blocks: int = _key(_Num(True, ge=1), doc="DMA blocks the host may have in flight")

@@ -309,3 +309,23 @@ def test_data_stall_starves_a_fast_line_but_prints_exactly(tmp_path, profile):
                    tmp_path / "m.tif", Faults(data_stall=0.02))
     assert sum(e["pauses"] for e in emu.events if e["event"] == "line") > 0
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+
+
+@pytest.mark.parametrize("level,flags", [
+    (0, {"EMPTY", "ALMOST_EMPTY", "LOW", "DREQ"}),
+    (8, {"ALMOST_EMPTY", "LOW", "DREQ"}),        # one fire's words: the next read empties it
+    (16, {"LOW", "DREQ"}),
+    (64, {"LOW", "DREQ"}),                        # the profile's almost_empty_words
+    (72, {"DREQ"}),
+    (256, {"FULL"}),
+])
+def test_fifo_flags_are_the_seeds(profile, level, flags, monkeypatch):
+    """FIFO_FLAGS (docs/protocol.md, seed 4.2.2): ALMOST_EMPTY as the seed defines it (the
+    next read empties the FIFO), the programmable LOW level beside it."""
+    from wideprint.device_sim.fpga import Fpga
+    fpga = Fpga(8, fifo_words=256, pass_buffer_words=0, ring_blocks=4, almost_empty_words=64)
+    monkeypatch.setattr(fpga, "fifo_level_words", lambda *a: level)
+    got = fpga.fifo_flags()
+    names = {n for n in ("EMPTY", "ALMOST_EMPTY", "FULL", "DREQ", "LOW")
+             if got & getattr(P, f"FIFO_{n}")}
+    assert names == flags

@@ -298,3 +298,22 @@ def test_sigmoid_is_jerk_limited(profile):
     assert sigma == pytest.approx(2.95, abs=0.01)
     assert long_s.duration - long_t.duration == pytest.approx(
         (sigma - 1) * (vmax - vs) / a * (1 - vs / vmax), rel=0.1)
+
+
+def test_the_thesis_line_from_the_command_line():
+    """`wideprint test-print line --thesis` (docs/motion.md): the thesis' 24,000-count line
+    at 150 dpi, 100 mm/s, the DSP's loop at 50 ms, printed on the emulator; it reports what
+    the thesis measured."""
+    import re
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "test-print", "line", "--thesis",
+                        "--device", "emulator"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("thesis line")]
+    assert lines, r.stdout
+    for ln in lines:
+        m = re.search(r"servo every 50 ms; max following error ([\d.]+) counts, final position "
+                      r"error ([-+\d.]+) counts, .*; 5000 of 5000 columns fired", ln)
+        assert m, ln
+        assert float(m.group(1)) < 2.0 and abs(float(m.group(2))) < 1.0

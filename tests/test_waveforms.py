@@ -79,6 +79,14 @@ def test_vcd_configuration_trace_and_print_cycle(tmp_path, profile):
     a = {t for t, _ in sig["encoder_A"]}
     b = {t for t, _ in sig["encoder_B"]}
     assert a and b and len(a & b) <= 1                              # only the initial value
+    # 150 dpi fires on the rising edge of channel A (docs/protocol.md, "DPI modes"): the
+    # encoder edge each fire's data follows is A going high, on the trigger count 4n
+    a_rise = [t for t, v in sig["encoder_A"] if v == 1]
+    count = sig["qep_count"]
+    for f in range(3):
+        edge = max(t for t in a | b if t <= fires[128 * f])      # before its first DSTB
+        assert edge in a_rise and edge not in b, f"fire {f}"
+        assert value_at(count, edge) % 4 == 0
 
 
 @pytest.mark.parametrize("dpi,passes,bidir", [(150, 1, False), (300, 2, True), (600, 4, True),
