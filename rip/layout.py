@@ -234,7 +234,8 @@ def _avail_cols(settings: RipSettings, profile, paper_mm: float | None, g: _Grid
 
 
 def plan_layout(paths, settings: RipSettings, profile, paper_mm: float | None = None,
-                when: datetime | None = None, sizes: dict | None = None) -> Plan:
+                when: datetime | None = None, sizes: dict | None = None,
+                names: dict | None = None) -> Plan:
     """The layout of `paths` under `settings` (geometry only: files are opened to learn
     their placed size, nothing is ripped).  `paper_mm`: the measured paper width, when
     known (nesting and tiles pack into it less the margins).  `sizes` caches the placed
@@ -268,7 +269,8 @@ def plan_layout(paths, settings: RipSettings, profile, paper_mm: float | None = 
     def label(path: str, w: int, h: int, extra: str = "") -> str:
         if not pl.label:
             return extra
-        text = (f"{os.path.basename(path)}  {when:%Y-%m-%d %H:%M}  {settings.dpi} dpi "
+        shown = (names or {}).get(path) or os.path.basename(path)     # the job's own name
+        text = (f"{shown}  {when:%Y-%m-%d %H:%M}  {settings.dpi} dpi "
                 f"{settings.passes} pass{'es' if settings.passes > 1 else ''} {settings.dither}  "
                 f"{g.mm_x(w):.0f} x {g.mm_y(h):.0f} mm")
         return f"{extra}  {text}" if extra else text
@@ -580,11 +582,14 @@ class LayoutJob(PrintableJob):
     PrintableJob of a layout: `RipJob` makes one when the settings ask for a layout."""
 
     def __init__(self, paths, settings: RipSettings, profile, paper_mm: float | None = None,
-                 when: datetime | None = None):
+                 when: datetime | None = None, names=()):
         self.paths = [os.fspath(p) for p in paths]
         self.path = self.paths[0]
         self.settings, self.profile = settings, profile
-        self.plan = plan_layout(self.paths, settings, profile, paper_mm, when)
+        # names: what the labels call the files (a print server's spooled copies have
+        # names of their own; the label shows the job's file name)
+        self.plan = plan_layout(self.paths, settings, profile, paper_mm, when,
+                                names=dict(zip(self.paths, names)) if names else None)
         self.width, self.height = self.plan.width, self.plan.height
         self._free: dict[tuple, list] = {}        # item key -> open RipJobs not in a run
         self._runs_left: Counter = Counter()      # item key -> runs still to come

@@ -142,6 +142,7 @@ class RipJob(PrintableJob):
     profile: Profile = field(default_factory=load_profile)
     more: tuple = ()                     # further files of a nested layout (docs/layout.md)
     paper_mm: float | None = None        # the measured paper width, when known (nesting)
+    names: tuple = ()                    # the files' names on labels (path, *more), if not theirs
 
     def __post_init__(self):
         self.settings.check(self.profile)
@@ -150,7 +151,7 @@ class RipJob(PrintableJob):
         if wants_layout(self.settings.placement, self.more):
             # one layout is one job: its items placed on one sheet, composed in bands
             self.layout = LayoutJob([self.path, *self.more], self.settings, self.profile,
-                                    paper_mm=self.paper_mm)
+                                    paper_mm=self.paper_mm, names=self.names)
             self.source = None
             self.width, self.height = self.layout.width, self.layout.height
             return

@@ -102,3 +102,20 @@ def test_a_nest_member_is_acted_on_through_its_sheet(server):
     client.pause_queue(False)
     s2 = client.job(ids[1])
     assert s2["nested_in"] is None and s2["state"] == "queued"
+
+
+def test_labels_name_the_jobs_not_their_spooled_copies(server):
+    """A print server's files are spooled under names of their own: a labelled sheet still
+    shows each job's file name (RipJob names=, docs/layout.md)."""
+    srv, client, tmp = server
+    fs = files(tmp, 2)
+    s = {"placement": {"size": "pixels", "nest": True, "label": True}}
+    ids = [client.submit(f, name=f"poster-{i}.tif", settings=s)["job"]["id"] for i, f in enumerate(fs)]
+    jobs = [srv.spool.get(i) for i in ids]
+    from wideprint.rip.settings import from_mapping
+    rip = RipJob(jobs[0]["spool_path"], from_mapping(s), srv.profile,
+                 more=(jobs[1]["spool_path"],), names=("poster-0.tif", "poster-1.tif"))
+    labels = sorted(sl.label for sl in rip.layout.plan.slots)
+    rip.close()
+    assert [lb.split()[0] for lb in labels] == ["poster-0.tif", "poster-1.tif"]
+    assert all(jobs[0]["spool_path"].rsplit("/", 1)[1] not in lb for lb in labels)

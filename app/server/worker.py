@@ -391,7 +391,8 @@ class Worker(threading.Thread):
             members = self.spool.members(job)
             try:
                 rip = RipJob(job["spool_path"], rip_settings(settings), self.profile,
-                             more=tuple(m["spool_path"] for m in members))
+                             more=tuple(m["spool_path"] for m in members),
+                             names=(job["name"], *(m["name"] for m in members)))
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
                 self._account(job, copy, started, None, "failed", msg, resumed)
