@@ -234,17 +234,6 @@ def _nest_files(files: list[str], unlisted: dict, settings, profile) -> tuple[li
     return alone + [s[0] for s in sheets], [()] * len(alone) + [tuple(s[1:]) for s in sheets]
 
 
-def _layout_line(lay: dict) -> str:
-    """The layout's figures on the `print` output; for a nest, the media saved."""
-    line = (f"layout {lay['mode']}: {lay['items']} item{'s' if lay['items'] != 1 else ''} on "
-            f"{lay['width_mm']:.0f} x {lay['length_mm']:.0f} mm")
-    if lay["mode"] == "nest":
-        line += (f", {lay['saved_mm']:.0f} mm of media saved ({lay['saved_percent']:.1f} %, "
-                 f"{lay['saved_m2']:.2f} m2) against {lay['sequential_length_mm']:.0f} mm one "
-                 f"after another")
-    return line
-
-
 def cmd_print(args) -> int:
     import os
     import tempfile
@@ -406,9 +395,10 @@ def cmd_print(args) -> int:
                       + (f" -> {shown(rep['media'])}" if rep["media"] else "")
                       + (f", scan {shown(rep['scan'])}" if rep.get("scan") else ""), file=say)
                 if rip.layout is not None:
+                    from ..rip.layout import layout_line
                     rep["layout"] = rip.layout.report
                     rep["files"] = [f, *extras[i]]
-                    print(f"{shown(f, NAME_LIMIT)}: {_layout_line(rep['layout'])}", file=say)
+                    print(f"{shown(f, NAME_LIMIT)}: {layout_line(rep['layout'])}", file=say)
                 if args.preview:
                     from ..rip.planes import write_preview
                     preview = _media_path(args.preview, i, len(files))

@@ -410,6 +410,18 @@ def _report(plan: Plan, paths, sizes, box_wh, gy, avail, shelves, when, paper_mm
                 made=when.strftime("%Y-%m-%d %H:%M:%S"))
 
 
+def layout_line(lay: dict) -> str:
+    """The layout's figures in a line (`print` output, a server job's message); for a nest,
+    the media saved."""
+    line = (f"layout {lay['mode']}: {lay['items']} item{'s' if lay['items'] != 1 else ''} on "
+            f"{lay['width_mm']:.0f} x {lay['length_mm']:.0f} mm")
+    if lay["mode"] == "nest":
+        line += (f", {lay['saved_mm']:.0f} mm of media saved ({lay['saved_percent']:.1f} %, "
+                 f"{lay['saved_m2']:.2f} m2) against {lay['sequential_length_mm']:.0f} mm one "
+                 f"after another")
+    return line
+
+
 def printed_size(paths, settings: RipSettings, profile, paper_mm: float | None = None
                  ) -> tuple[int, int, float, float]:
     """(width_dots, height_rows, width_mm, height_mm) the job prints, the whole layout when

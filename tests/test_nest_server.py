@@ -67,6 +67,7 @@ def test_a_count_rule_nests_three_jobs_on_one_sheet_bit_exact(server):
     media = read_planes(tmp / "media" / f"job-{ids[0]}.tif")
     assert media.shape[:2] == (h, w) and np.array_equal(media, planes)
     assert len(client.report(ids[0])) == 1          # one sheet printed, accounted once
+    assert "layout nest: 3 items" in done["message"] and "mm of media saved" in done["message"]
     # a job with other settings is not nested with them
     other = client.submit(fs[3], settings={"placement": {"size": "pixels"}})["job"]["id"]
     assert client.wait(other, 60)["state"] == "done"

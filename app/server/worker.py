@@ -373,6 +373,7 @@ class Worker(threading.Thread):
             if settings.get(k):
                 settings[k] = str(icc / settings[k])
         first = True
+        layout = None
         while job["copies_done"] < job["copies"]:
             copy = job["copies_done"] + 1
             if not first:
@@ -393,6 +394,7 @@ class Worker(threading.Thread):
                 rip = RipJob(job["spool_path"], rip_settings(settings), self.profile,
                              more=tuple(m["spool_path"] for m in members),
                              names=(job["name"], *(m["name"] for m in members)))
+                layout = rip.layout.report if rip.layout is not None else None
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
                 self._account(job, copy, started, None, "failed", msg, resumed)
@@ -466,7 +468,9 @@ class Worker(threading.Thread):
             self._measure_paper()
             self._account(job, copy, started, rep, "done", "", resumed)
             job = self.spool.copy_done(job_id)
-        self._finish(job, "done", "")
+        from ...rip.layout import layout_line
+        # a layout's figures (a nest: the media it saved) stay with the job
+        self._finish(job, "done", layout_line(layout) if layout else "")
 
     @staticmethod
     def _close_earlier_attempt(dev, job_id: int) -> None:
