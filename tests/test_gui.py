@@ -442,3 +442,32 @@ def test_no_clipped_text_and_a_stable_layout(qtbot, win, server, tmp_path, size)
     win.printers_panel.cards["main"].fault.setText("over-temperature on head K1 " * 4)
     qtbot.wait(50)
     assert (win.split.geometry(), win.queue_view.geometry(), win.printers_panel.geometry()) == before
+
+
+def test_calibration_from_a_scan_in_the_dialog(qtbot, tmp_path):
+    """The calibration dialog offers what `wideprint calibrate` does: load the scan of the
+    printed pattern, see what was measured, accept it into the printer profile."""
+    import shutil
+    from wideprint.app.cli import main
+    from wideprint.app.gui.calibration import CalibrationDialog
+    from wideprint.rip.profile import DEFAULT_PROFILE, load_profile
+    prof = tmp_path / "printer.toml"
+    shutil.copy(DEFAULT_PROFILE, prof)
+    scan = tmp_path / "bidir-scan.tif"
+    assert main(["test-print", "bidir-scan", "--width-mm", "40", "--dpi", "300", "--scan-out",
+                 str(scan), "--scan-dpi", "1200", "--inject", "bidir-error=0.5col",
+                 "--inject", "scan-rotation=1.0"]) == 0
+    dlg = CalibrationDialog(str(prof), lambda *a: 0, None, False)
+    qtbot.addWidget(dlg)
+    dlg.pattern.setCurrentIndex(dlg.pattern.findData("bidir-scan"))
+    dlg.dpi.setCurrentIndex(dlg.dpi.findData(300))
+    dlg.width_mm.setValue(40)
+    dlg.measure_scan(str(scan))
+    assert dlg.scan_accept.isEnabled(), dlg.scan_result.text()
+    assert "bidir" in dlg.measured.kind
+    dlg.accept_scan()
+    shift = load_profile(prof).bidir_shift_columns(300)
+    assert abs(shift - 0.5) < 0.1, shift
+    # a scan of something else is named, not measured
+    dlg.measure_scan(str(tmp_path / "missing.tif"))
+    assert not dlg.scan_accept.isEnabled() and dlg.scan_result.text()

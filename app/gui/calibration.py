@@ -15,7 +15,7 @@ import numpy as np
 from PySide6.QtCore import QEvent, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QFont, QPainter, QPen
 from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDialog, QDialogButtonBox,
-                               QDoubleSpinBox, QFormLayout, QGridLayout, QGroupBox, QHBoxLayout,
+                               QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QListView, QListWidget, QListWidgetItem, QMessageBox,
                                QPushButton, QSizePolicy, QSpinBox, QStackedWidget, QVBoxLayout,
                                QWidget)
@@ -33,7 +33,13 @@ PATTERN_NAMES = {
     "head-align": "Head alignment",
     "line": "Line (one nozzle)",
     "sawtooth": "Sawtooth (encoder / shift register)",
+    "bidir-scan": "Bidirectional, for a scan",
+    "heads-scan": "Head positions, for a scan",
+    "feed-scan": "Paper feed, for a scan",
 }
+# the scan patterns -> the `wideprint calibrate` measurement that reads them (app/calibrate.py)
+SCAN_KINDS = {"nozzle-check": "nozzles", "bidir-scan": "bidir", "heads-scan": "heads",
+              "feed-scan": "feed"}
 
 
 # -- reading the printed patterns (pure; the tests use them too) ---------------------------
@@ -315,16 +321,81 @@ class CalibrationDialog(QDialog):
         self.profile_label.setStyleSheet("color:#666;")
         self.profile_label.setWordWrap(True)
 
+        # calibration from a scan of the printed pattern (docs/calibration.md): load it, see
+        # what was measured, accept it into the printer profile
+        scanrow = QHBoxLayout()
+        self.scan_btn = QPushButton("Measure a scan…")
+        self.scan_btn.setObjectName("cal_scan")
+        self.scan_btn.setToolTip("Load a scan (TIFF) of this pattern as printed: the pattern is "
+                                 "found at any placement and a few degrees of rotation, and "
+                                 "measured (wideprint calibrate)")
+        self.scan_btn.clicked.connect(self._choose_scan)
+        self.scan_result = QLabel("")
+        self.scan_result.setObjectName("cal_scan_result")
+        self.scan_result.setWordWrap(True)
+        self.scan_result.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.scan_accept = QPushButton("Accept into the profile")
+        self.scan_accept.setObjectName("cal_scan_accept")
+        self.scan_accept.setEnabled(False)
+        self.scan_accept.clicked.connect(self.accept_scan)
+        scanrow.addWidget(self.scan_btn)
+        scanrow.addWidget(self.scan_result, 1)
+        scanrow.addWidget(self.scan_accept)
+        self.measured = None
+
         lay = QVBoxLayout(self)
         lay.addLayout(top)
         lay.addWidget(self.view, 1)
         lay.addWidget(self.choice)
+        lay.addLayout(scanrow)
         lay.addWidget(self.profile_label)
         lay.addWidget(buttons)
         self.pattern.currentIndexChanged.connect(self._pattern_changed)
         self.pattern.setCurrentIndex(max(0, self.pattern.findData(s.get("pattern", "nozzle-check"))))
         self._pattern_changed()
         self.resize(860, 640)
+
+    # -- calibration from a scan -------------------------------------------------------------
+    def _choose_scan(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Scan of the printed pattern", "",
+                                              "Scans (*.tif *.tiff);;All files (*)")
+        if path:
+            self.measure_scan(path)
+
+    def measure_scan(self, path: str) -> None:
+        """Measure the scan of the pattern chosen (its dpi and length as chosen here)."""
+        from ..calibrate import CalibrationError, calibrate
+        kind = SCAN_KINDS.get(self.kind)
+        self.measured = None
+        self.scan_accept.setEnabled(False)
+        if kind is None:
+            self.scan_result.setText("Choose a pattern made for a scan (nozzle check, "
+                                     "bidirectional / head positions / paper feed for a scan).")
+            return
+        try:
+            res = calibrate(kind, path, self.profile, self.dpi.currentData(),
+                            self.width_mm.value())
+        except (CalibrationError, ValueError, OSError) as exc:
+            self.scan_result.setText(f"<span style='color:#c62828'>{exc}</span>")
+            return
+        self.measured = res
+        self.scan_result.setText("\n".join(res.text[1:]) or "nothing to change")
+        self.scan_result.setToolTip("\n".join(res.text))
+        self.scan_accept.setEnabled(bool(res.write))
+
+    def accept_scan(self) -> None:
+        res = self.measured
+        if res is None or not res.write:
+            return
+        try:
+            self.profile = save_calibration(self.profile_path, **res.write)
+        except (ValueError, OSError) as exc:
+            self.scan_result.setText(f"<span style='color:#c62828'>not saved: {exc}</span>")
+            return
+        log.info("calibration from a scan (%s) saved to %s", res.kind, self.profile_path)
+        self.scan_accept.setEnabled(False)
+        self.scan_result.setText(self.scan_result.text() + "\nSaved to the printer profile.")
+        self.profileSaved.emit(self.profile_path)
 
     def _dead_nozzle_box(self) -> QGroupBox:
         """nozzle-check: mark dead nozzles (per head, 1..126) and clear them; what the
