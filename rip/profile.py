@@ -622,6 +622,10 @@ class ColorSection(_Section):
                                            doc="for separations made from RGB or grey; "
                                            "none: no limit")
     intent: str = _key(_Str(INTENTS), "relative", doc="informational: jobs choose theirs")
+    drop_budget: dict[int, float] = _key(_DpiTable(_Num(gt=0, le=1), fill=1.0), {},
+                                         doc="linearisation per dpi mode: the fraction of "
+                                         "each ink amount the mode prints, all passes "
+                                         "together (docs/color.md); 1.0: as separated")
 
 
 _IDENTITY = [[0, 0], [255, 255]]
