@@ -1,16 +1,23 @@
 """Linearisation (docs/color.md "Linearisation"): with the profile's [color] drop_budget
 set to 150 / dpi, the same image lays down the same ink per m² at 150, 300 and 600 dpi
 (within 5 %) for light and mid tones of every ink, through error diffusion and screens;
-without it (the shipped default) ink per m² grows with the mode's columns."""
+without it (the shipped default) ink per m² grows with the mode's columns.  A step wedge
+printed on a machine with strong dot gain, scanned and measured (`calibrate wedge`), writes
+per-ink curves under which the reprinted wedge is linear."""
+
+import json
+import shutil
 
 import numpy as np
 import pytest
 import tifffile
 
 from test_swath import variant_profile
+from wideprint.app.cli import main
 from wideprint.rip.pipeline import RipJob, RipSettings, profile_curves
 from wideprint.rip.place import Placement
-from wideprint.rip.profile import load_profile
+from wideprint.rip.profile import DEFAULT_PROFILE, load_profile
+from wideprint.rip.testprints import WEDGE_STEPS
 
 MODES = (150, 300, 600)
 LINEAR = "drop_budget = { 150 = 1.0, 300 = 0.5, 600 = 0.25 }"
@@ -55,6 +62,7 @@ def tints(tmp_path_factory):
 
 
 def test_the_shipped_profile_states_linearisation_off():
+    assert "\ndrop_budget = { 150 = 1.0, 300 = 1.0, 600 = 1.0 }\n" in DEFAULT_PROFILE.read_text()      # stated, not implied
     prof = load_profile()
     assert prof.color.drop_budget == {d: 1.0 for d in prof.dpi_modes}
     assert all(profile_curves(prof, d) is None for d in prof.dpi_modes)
@@ -84,3 +92,57 @@ def test_the_budget_scales_the_curves_lut(tints):
     lut = profile_curves(on, 600)
     assert lut[:, 255].tolist() == [64] * 4 and lut[:, 128].tolist() == [32] * 4
     assert lut[:, 45].tolist() == [11] * 4           # 11.25, rounded: the 8-bit bound
+
+
+# -- per-channel curves from a measured step wedge ------------------------------------------------
+GAIN = ["dot-diameter=140um", "scan-rotation=1.5", "scan-scale=1.002", "scan-noise=2", "seed=5"]
+
+
+def _wedge(tmp, name, profile, capsys, write=False):
+    """Print the wedge at 300 dpi on a machine with strong dot gain, scan it, calibrate:
+    what `calibrate wedge --json` found."""
+    scan = tmp / f"{name}.tif"
+    args = ["test-print", "wedge-scan", "--width-mm", "100", "--dpi", "300", "--scan-out",
+            str(scan), "--scan-dpi", "600", "--profile", str(profile)]
+    assert main(args + [a for g in GAIN for a in ("--inject", g)]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "wedge", "--scan", str(scan), "--dpi", "300", "--profile",
+                 str(profile), "--json"] + (["--write"] if write else [])) == 0
+    return json.loads(capsys.readouterr().out)["found"]
+
+
+def test_a_wedge_with_dot_gain_is_measured_and_its_curves_linearise_the_reprint(tmp_path, capsys):
+    profile = tmp_path / "printer.toml"
+    shutil.copy(DEFAULT_PROFILE, profile)
+    before = _wedge(tmp_path, "before", profile, capsys, write=True)
+    assert before["steps"] == list(WEDGE_STEPS)
+    for ink in "CMYK":                      # 140 µm dots: 50 % ink covers nearly all paper
+        assert before["inks"][ink]["tone"][5] > 0.9 and before["inks"][ink]["max_error"] > 0.4
+    curves = load_profile(profile).curves
+    for ink in "CMYK":                      # the written curve takes the mid tones down
+        pts = dict(getattr(curves, ink))
+        assert pts[0] == 0 and pts[255] == 255 and pts[128] < 64
+    after = _wedge(tmp_path, "after", profile, capsys)
+    for ink in "CMYK":                      # one iteration: every step within 4 points
+        assert after["inks"][ink]["max_error"] < 0.04, (ink, after["inks"][ink])
+
+
+def test_typed_in_wedge_values_write_the_inverse_curve(tmp_path, capsys):
+    profile = tmp_path / "printer.toml"
+    shutil.copy(DEFAULT_PROFILE, profile)
+    # a measured dot area with 20 points of gain at 50 %: the curve must be its inverse
+    def gain(v):
+        x = np.asarray(v) / 255
+        return x + 0.8 * x * (1 - x)
+    fine = np.linspace(0, 255, 2551)
+    tones = [round(100 * float(gain(v)), 3) for v in WEDGE_STEPS]
+    capsys.readouterr()
+    assert main(["calibrate", "wedge", "--values", "M=" + ",".join(map(str, tones)),
+                 "--profile", str(profile), "--write", "--json"]) == 0
+    got = dict(load_profile(profile).curves.M)
+    for v in WEDGE_STEPS:
+        assert abs(got[v] - np.interp(v / 255, gain(fine), fine)) < 2.0, (v, got[v])
+    assert got[128] < 100                       # 50 % ink covers 70 %: far less ink
+    assert load_profile(profile).curves.C == ((0, 0), (255, 255))       # others kept
+    assert main(["calibrate", "wedge", "--values", "M=1,2,3", "--profile", str(profile)]) == 2
+    assert main(["calibrate", "wedge", "--profile", str(profile)]) == 2      # neither given
