@@ -85,6 +85,47 @@ def test_without_linearisation_ink_per_m2_doubles_with_each_mode(tints):
     assert np.allclose(ml / ml[0], [[1], [2], [4]], rtol=0.05), ml.round(2).tolist()
 
 
+def test_the_emulator_reports_the_same_ink_per_m2_for_every_mode_and_pass_count(tints):
+    """The printed drops (the emulator's report): the budget holds through the weave, and
+    the pass count only shares the same drops among strokes."""
+    from wideprint.app.devices import open_device
+    from wideprint.driver.job import PrintJob
+    tmp, srcs = tints
+    on = _profile(tmp, LINEAR, "linear")
+    per_m2 = {}
+    for dpi, passes in ((150, 1), (300, 1), (300, 4), (600, 2)):
+        settings = RipSettings(placement=Placement(width_mm=20.0, height_mm=20.0), dpi=dpi,
+                               passes=passes)
+        dev = open_device("emulator", on, None)
+        try:
+            job = RipJob(str(srcs[64]), settings, on)
+            area_m2 = (job.width * 0.0254 / dpi) * (job.height * on.row_um * 1e-6)
+            rep = PrintJob(dev, job).run()
+        finally:
+            dev.emulator.close()
+        assert rep.state == "done"
+        per_m2[dpi, passes] = np.array(rep.ink_ml) / area_m2
+    assert np.array_equal(per_m2[300, 1], per_m2[300, 4])
+    ref = per_m2[150, 1]
+    for key, v in per_m2.items():
+        assert np.all(np.abs(v / ref - 1) < 0.05), (key, v.round(3).tolist(), ref.round(3).tolist())
+
+
+def test_the_job_estimate_counts_the_budget(tints):
+    """The preview's ink estimate (made without the budget) is scaled by it: the same
+    ml/m² in every mode, as the RIP lays down."""
+    from wideprint.app.jobpreview import compute_preview
+    tmp, srcs = tints
+    on = _profile(tmp, LINEAR, "linear")
+    got = []
+    for d in MODES:
+        rs = RipSettings(placement=Placement(width_mm=30.0, height_mm=30.0), dpi=d, passes=2)
+        est = compute_preview(str(srcs[128]), rs, on).estimate
+        got.append(np.array(est.ink_ml) / est.area_m2)
+    rip = ink_ml_per_m2(on, srcs[128], 600, "vced")
+    assert np.all(np.abs(np.array(got) / rip - 1) < 0.05), (np.round(got, 3).tolist(), rip)
+
+
 def test_the_budget_scales_the_curves_lut(tints):
     tmp, _ = tints
     on = _profile(tmp, LINEAR, "linear")
