@@ -1,5 +1,5 @@
-"""`wideprint calibrate nozzles|bidir|heads|feed --scan SCAN.tif`: calibration from a scan
-of a test print (docs/calibration.md).
+"""`wideprint calibrate nozzles|bidir|heads|feed|wedge --scan SCAN.tif`: calibration from a
+scan of a test print (docs/calibration.md; the wedge: docs/color.md "Linearisation").
 
 The pattern is rebuilt from the profile, dpi and width it was printed with
 (`rip.testprints.scan_layout`), so every mark's model position is known. In the scan the
@@ -25,7 +25,7 @@ if TYPE_CHECKING:      # the patterns import the RIP's kernels: not for `widepri
     from ..rip.testprints import Mark, ScanLayout
 
 KINDS = {"nozzles": "nozzle-check", "bidir": "bidir-scan", "heads": "heads-scan",
-         "feed": "feed-scan"}
+         "feed": "feed-scan", "wedge": "wedge-scan"}
 EXIT_OK, EXIT_USAGE, EXIT_NOT_FOUND = 0, 2, 3
 BAND = (0, 1, 2, 1)          # the scan band each ink darkens most: C red, M green, Y blue, K
 NOISE_LEVELS = 6.0           # darkness below this is paper (four σ of a 1.5-level noise)
@@ -43,6 +43,12 @@ class CalibrationError(Exception):
 def read_scan(path: str, scan_dpi: float | None = None) -> tuple[np.ndarray, float]:
     """(darkness per band (H, W, bands) float32, scan dpi).  Darkness is paper white less
     the value, in 8-bit levels; the white is each band's 90th percentile."""
+    dark, _, dpi = read_scan_white(path, scan_dpi)
+    return dark, dpi
+
+
+def read_scan_white(path: str, scan_dpi: float | None = None):
+    """read_scan's darkness, the paper white per band (levels) and the scan dpi."""
     import tifffile
     with tifffile.TiffFile(path) as tif:
         page = tif.pages[0]
@@ -63,7 +69,7 @@ def read_scan(path: str, scan_dpi: float | None = None) -> tuple[np.ndarray, flo
         img = img[:, :, None]
     img = img[:, :, :3]
     white = np.percentile(img[::4, ::4].reshape(-1, img.shape[2]), 90, axis=0)
-    return np.clip(white[None, None, :] - img, 0, None), float(scan_dpi)
+    return np.clip(white[None, None, :] - img, 0, None), white, float(scan_dpi)
 
 
 @dataclass
@@ -112,8 +118,9 @@ class Scan:
     """A scan of a pattern, registered: marks are measured in the image frame."""
 
     def __init__(self, dark: np.ndarray, scan_dpi: float, layout: ScanLayout, profile: Profile,
-                 dpi: int):
+                 dpi: int, white: np.ndarray | None = None):
         self.dark, self.layout, self.profile = dark, layout, profile
+        self.white = np.full(dark.shape[2], 255.0) if white is None else np.asarray(white)
         self.pix = 25_400.0 / scan_dpi
         self.col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
         self.row_um = profile.row_um
@@ -199,6 +206,27 @@ class Scan:
         if M is None:
             raise CalibrationError("the frame bars give no transform")
         return M
+
+    def reflectance(self, m: Mark, inset: float = 0.2) -> float:
+        """The mean linear reflectance (sRGB decoded, 0..1) in the ink's band over the mark's
+        cells less `inset` of its size on every side, sampled on a model grid at the scan's
+        pixel pitch through the registration."""
+        x0, x1 = m.c0 * self.col_um, m.c1 * self.col_um
+        y0, y1 = m.r0 * self.row_um, m.r1 * self.row_um
+        dx, dy = inset * (x1 - x0), inset * (y1 - y0)
+        xs = np.arange(x0 + dx, x1 - dx, self.pix)
+        ys = np.arange(y0 + dy, y1 - dy, self.pix)
+        mx, my = np.meshgrid(xs, ys)
+        u, v = self.reg.to_scan(mx, my)
+        band = 0 if self.grey else BAND[m.channel]
+        img = self.dark[:, :, band]
+        h, w = img.shape
+        ok = (u >= 0) & (u < w - 1) & (v >= 0) & (v < h - 1)
+        if not ok.any():
+            raise CalibrationError(f"a {m.head} patch lies outside the scan")
+        level = self.white[band] - img[v[ok].round().astype(int), u[ok].round().astype(int)]
+        x = np.clip(level / 255.0, 0, 1)
+        return float(np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).mean())
 
     def measure(self, m: Mark) -> Measured:
         model = self.model_centroid(m)
@@ -357,8 +385,80 @@ def calibrate_feed(scan: Scan, res: Result) -> None:
     res.write = dict(travel_error_ppm=ppm)
 
 
+def wedge_curve(old, steps, tone) -> list[tuple[float, float]]:
+    """The curve that makes the measured wedge linear (docs/color.md "Linearisation"):
+    the wedge was printed through `old` ([in, out] points), input v gave `tone[i]` at
+    `steps[i]`; the new curve sends v to old(u), u the input whose tone was v / 255."""
+    steps = np.asarray(steps, np.float64)
+    t = np.maximum.accumulate(np.asarray(tone, np.float64))
+    if not t[-1] > t[0]:
+        raise CalibrationError("the wedge shows no tone: is it this pattern and ink?")
+    t = (t - t[0]) / (t[-1] - t[0]) + np.arange(len(t)) * 1e-9    # strictly increasing
+    u = np.interp(steps / 255.0, t, steps)
+    u[0], u[-1] = steps[0], steps[-1]        # paper stays paper, the solid stays the solid
+    old = np.asarray(old, np.float64)
+    out = np.clip(np.interp(u, old[:, 0], old[:, 1]), 0, 255)
+    return [(float(v), round(float(o), 2)) for v, o in zip(steps, out)]
+
+
+def wedge_result(res: Result, profile: Profile, steps, tones: dict[str, list[float]]) -> None:
+    """Per ink its tones (0..1 from paper to solid) -> the curves to write."""
+    steps = list(steps)
+    curves, found = {}, {}
+    for ink, tone in tones.items():
+        t = np.asarray(tone, np.float64)
+        t = (t - t[0]) / (t[-1] - t[0]) if t[-1] != t[0] else t
+        err = t - np.asarray(steps) / 255.0
+        curves[ink] = wedge_curve(getattr(profile.curves, ink), steps, tone)
+        found[ink] = dict(tone=[round(float(x), 4) for x in t],
+                          max_error=round(float(np.abs(err).max()), 4))
+        worst = int(np.abs(err).argmax())
+        res.text.append(f"wedge {ink}: tone at " + ", ".join(
+            f"{v}:{x * 100:.0f}%" for v, x in zip(steps, t)) + f"; worst {err[worst] * 100:+.1f} "
+            f"points at {steps[worst]}")
+        res.text.append(f"  curve {ink} = " + str([list(p) for p in curves[ink]]))
+    res.found.update(steps=steps, inks=found)
+    res.write = dict(curves=curves)
+
+
+def calibrate_wedge(scan: Scan, res: Result) -> None:
+    """Each patch's reflectance in its ink's band; its tone is the Murray-Davies dot area
+    (paper - R) / (paper - solid), paper and solid the wedge's own 0 and 255 steps."""
+    from ..rip.profile import COLORS
+    from ..rip.testprints import WEDGE_STEPS
+    tones = {}
+    for ch, ink in enumerate(COLORS):
+        refl = {m.nozzle: scan.reflectance(m) for m in scan.layout.marks
+                if m.kind == "patch" and m.channel == ch}
+        r = np.array([refl[v] for v in WEDGE_STEPS])
+        tones[ink] = list((r[0] - r) / (r[0] - r[-1]) if r[0] > r[-1] else np.zeros_like(r))
+    wedge_result(res, scan.profile, WEDGE_STEPS, tones)
+
+
+def parse_values(items: list[str]) -> dict[str, list[float]]:
+    """--values INK=T0,T1,... (one a WEDGE_STEPS amount): typed-in wedge measurements."""
+    from ..rip.profile import COLORS
+    from ..rip.testprints import WEDGE_STEPS
+    out = {}
+    for item in items:
+        ink, sep, rest = item.partition("=")
+        if not sep or ink not in COLORS:
+            raise ValueError(f"--values {item!r}: must be INK=T0,T1,... with INK one of C, M, Y, K")
+        try:
+            vals = [float(x) for x in rest.split(",")]
+        except ValueError:
+            raise ValueError(f"--values {item!r}: the tones must be numbers") from None
+        if len(vals) != len(WEDGE_STEPS):
+            raise ValueError(f"--values {ink}: {len(vals)} tones given, the wedge has "
+                             f"{len(WEDGE_STEPS)} steps ({', '.join(map(str, WEDGE_STEPS))})")
+        if not vals[-1] > vals[0]:
+            raise ValueError(f"--values {ink}: the last (solid) tone must exceed the first (paper)")
+        out[ink] = vals
+    return out
+
+
 CALIBRATIONS = {"nozzles": calibrate_nozzles, "bidir": calibrate_bidir,
-                "heads": calibrate_heads, "feed": calibrate_feed}
+                "heads": calibrate_heads, "feed": calibrate_feed, "wedge": calibrate_wedge}
 
 
 def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width_mm: float = 100.0,
@@ -368,8 +468,8 @@ def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width
     k = profile.k(dpi)
     width = int(round(width_mm / 25.4 * profile.counts_per_inch / k))
     layout = scan_layout(KINDS[kind], profile, width, dpi)
-    dark, sdpi = read_scan(scan_path, scan_dpi)
-    scan = Scan(dark, sdpi, layout, profile, dpi)
+    dark, white, sdpi = read_scan_white(scan_path, scan_dpi)
+    scan = Scan(dark, sdpi, layout, profile, dpi, white)
     res = Result(kind, dpi)
     res.text.append(f"{scan_path}: {KINDS[kind]} at {dpi} dpi found on a {sdpi:g} dpi scan, "
                     f"rotated {scan.reg.rotation_deg:+.2f}°, scale {scan.reg.scale:.4f}")
@@ -388,7 +488,16 @@ def cmd_calibrate(args) -> int:
         if args.write and not args.profile:
             raise ValueError("--write needs --profile: the printer profile to update "
                              "(a copy of the built-in one)")
-        res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi)
+        if args.values:
+            if args.kind != "wedge" or args.scan:
+                raise ValueError("--values is for `calibrate wedge`, instead of --scan")
+            from ..rip.testprints import WEDGE_STEPS
+            res = Result("wedge", args.dpi, ["wedge: typed-in tones"])
+            wedge_result(res, profile, WEDGE_STEPS, parse_values(args.values))
+        elif not args.scan:
+            raise ValueError("--scan SCAN.tif is required" + (" (or --values)" if args.kind == "wedge" else ""))
+        else:
+            res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi)
     except (ValueError, ProfileError, OSError) as exc:
         print(f"wideprint calibrate: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -418,11 +527,16 @@ def add_parser(sub) -> None:
                        "result in the printer profile (docs/calibration.md)",
                        description="Finds the test pattern in a scan (any placement, a few "
                        "degrees of rotation), measures it and reports dead nozzles, the "
-                       "bidirectional offset, head x/y offsets or the feed error; --write stores "
-                       "it in --profile. Print the pattern first: wideprint test-print "
-                       "nozzle-check|bidir-scan|heads-scan|feed-scan.")
+                       "bidirectional offset, head x/y offsets, the feed error or the inks' tone "
+                       "curves; --write stores it in --profile. Print the pattern first: "
+                       "wideprint test-print nozzle-check|bidir-scan|heads-scan|feed-scan|"
+                       "wedge-scan.")
     p.add_argument("kind", choices=tuple(KINDS))
-    p.add_argument("--scan", required=True, metavar="SCAN.tif", help="the scan (TIFF)")
+    p.add_argument("--scan", metavar="SCAN.tif", help="the scan (TIFF)")
+    p.add_argument("--values", action="append", metavar="INK=T0,...,T10",
+                   help="wedge: measured tones typed in instead of a scan, one for each of the "
+                   "eleven wedge steps from no ink to solid in tenths, in any unit rising "
+                   "from paper to solid (e.g. dot area in percent); repeat per ink")
     p.add_argument("--dpi", type=int, choices=setting("dpi").choices, default=150,
                    help="the dpi mode the pattern was printed at (default 150)")
     p.add_argument("--width-mm", type=float, default=100.0,

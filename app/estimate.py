@@ -20,7 +20,8 @@ are counted: the estimate is an upper bound for images with empty bands).
 
 Ink per colour (ml) = drops * profile.drop_volume_pl * 1e-9, with the drops counted in
 the preview's halftone (the RIP's real separation and dither at preview size) and
-scaled by (job dots / preview dots).  Area (m²) = width * length of the image.
+scaled by (job dots / preview dots) and by the dpi mode's [color] drop_budget (the
+preview is made without it: docs/color.md "Linearisation").  Area (m²) = width * length of the image.
 """
 
 from __future__ import annotations
@@ -100,7 +101,7 @@ def estimate(profile: Profile, width_dots: int, height_rows: int, dpi: int, pass
     e.stroke_s = parts["total"]
     e.time_s = copies * total_strokes * e.stroke_s
     if preview_drops is not None and preview_dots > 0:
-        ratio = (width_dots * height_rows) / preview_dots
+        ratio = (width_dots * height_rows) / preview_dots * profile.color.drop_budget.get(dpi, 1.0)
         e.drops = [int(round(float(d) * ratio)) for d in preview_drops]
         e.ink_ml = [d * profile.drop_volume_pl * 1e-9 * copies for d in e.drops]
     return e

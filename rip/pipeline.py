@@ -66,13 +66,16 @@ def prefetch(items: Iterator, depth: int = 2) -> Iterator:
         stop.set()
 
 
-def profile_curves(profile: Profile) -> np.ndarray | None:
-    """(4, 256) uint8 linearisation LUT from the profile's [curves], None if identity."""
+def profile_curves(profile: Profile, dpi: int | None = None) -> np.ndarray | None:
+    """(4, 256) uint8 LUT from the profile's [curves] and, for a dpi mode, its [color]
+    drop_budget (the curve's output times the budget, rounded: docs/color.md
+    "Linearisation"); None if identity."""
     lut = np.empty((4, 256), np.uint8)
     x = np.arange(256)
+    budget = 1.0 if dpi is None else profile.color.drop_budget.get(dpi, 1.0)
     for c, name in enumerate(COLORS):
         pts = np.asarray(getattr(profile.curves, name), dtype=np.float64)
-        lut[c] = np.clip(np.rint(np.interp(x, pts[:, 0], pts[:, 1])), 0, 255)
+        lut[c] = np.clip(np.rint(budget * np.interp(x, pts[:, 0], pts[:, 1])), 0, 255)
     return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
 
 
@@ -184,11 +187,11 @@ class RipJob(PrintableJob):
         s = self.settings
         if getattr(self.source, "separated", False):    # documents: Ghostscript applied the ICC path
             return Separator("cmyk", 8, intent=s.intent, ink_limit=self.ink_limit,
-                             curves=profile_curves(self.profile))
+                             curves=profile_curves(self.profile, s.dpi))
         return Separator(self.source.colorspace, self.source.depth,
                          embedded_icc=self.source.icc, input_icc=s.input_icc,
                          output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
-                         curves=profile_curves(self.profile))
+                         curves=profile_curves(self.profile, s.dpi))
 
     def _dead_rows(self):
         """(per colour the dead row phases, their period) when the weave leaves rows only

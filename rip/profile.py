@@ -622,6 +622,10 @@ class ColorSection(_Section):
                                            doc="for separations made from RGB or grey; "
                                            "none: no limit")
     intent: str = _key(_Str(INTENTS), "relative", doc="informational: jobs choose theirs")
+    drop_budget: dict[int, float] = _key(_DpiTable(_Num(gt=0, le=1), fill=1.0), {},
+                                         doc="linearisation per dpi mode: the fraction of "
+                                         "each ink amount the mode prints, all passes "
+                                         "together (docs/color.md); 1.0: as separated")
 
 
 _IDENTITY = [[0, 0], [255, 255]]
@@ -924,7 +928,8 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
                      head_x_um: dict[str, float] | None = None,
                      head_y_um: dict[str, float] | None = None,
                      head_y_rows: dict[str, int] | None = None,
-                     travel_error_ppm: float | None = None) -> Profile:
+                     travel_error_ppm: float | None = None,
+                     curves: dict[str, list[tuple[float, float]]] | None = None) -> Profile:
     """Write calibration results into a profile file, keeping its comments and layout
     (tomlkit edits the document in place), and return the reloaded profile, which
     validates them; a result that does not load leaves the file as it was.
@@ -934,8 +939,8 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     {"head": ..., "nozzle": ...} tables (None leaves the list alone, an empty list clears
     it); written as `dead_nozzles = [{ head = "M1", nozzle = 57 }, ...]` in [layout].
     From scans (docs/calibration.md): bidir_fine_steps {dpi: 64ths}, head_x_um and head_y_um
-    {head: µm} (each the whole table), head_y_rows {head: rows}, and [feed]
-    travel_error_ppm."""
+    {head: µm} (each the whole table), head_y_rows {head: rows}, [feed]
+    travel_error_ppm, and [curves] {ink: [(in, out), ...]} (inks not given are kept)."""
     path = Path(path)
     try:
         doc = tomlkit.parse(path.read_text())
@@ -970,6 +975,14 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
         if feed is None:
             raise ProfileError(f"{path}: no [feed] table to update")
         feed["travel_error_ppm"] = _um(travel_error_ppm)
+    if curves:
+        table = doc.get("curves")
+        if table is None:
+            doc["curves"] = tomlkit.table()
+            table = doc["curves"]
+        for ink, pts in curves.items():
+            table[ink] = tomlkit.parse(
+                "v = [" + ", ".join(f"[{_um(a)}, {_um(b)}]" for a, b in pts) + "]")["v"]
     if dead_nozzles is not None:
         dead = _dead_nozzle_list(path, dead_nozzles)
         items = [f'{{ head = "{h}", nozzle = {z} }}' for h, z in dead]

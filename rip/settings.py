@@ -34,7 +34,7 @@ PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page bo
 MARKS = ("none", "crop", "registration")                           # layout marks (docs/layout.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
 TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align", "bidir-scan",
-                 "heads-scan", "feed-scan")
+                 "heads-scan", "feed-scan", "wedge-scan")
 
 #: largest placed image side, in device columns or rows (3.4 m at 600 dpi is 80,315 columns;
 #: 1,000,000 rows is 68.55 m of media)

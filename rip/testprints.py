@@ -20,6 +20,10 @@ printed through the same planner and driver as any image.
                 column or row (`wideprint calibrate`, docs/calibration.md): vertical
                 segments and one-row dashes whose centroids are read, between two K bars
                 that locate the pattern on the scanner glass; `scan_layout` names them
+- wedge-scan:   a step wedge of each ink (WEDGE_STEPS), through the profile's curves and
+                the dpi mode's drop budget and the RIP's default halftone, between the
+                same K bars: `wideprint calibrate wedge` reads each step's tone
+                (docs/color.md "Linearisation")
 """
 
 from __future__ import annotations
@@ -102,7 +106,11 @@ FEED_STROKES = 4
 FEED_NOZZLES = tuple(range(8, 124, 20))               # K1 dashes in every stroke
 FEED_DASH_UM = 3000.0
 FEED_DASHES_X = 3                                     # dashes per nozzle row, along the sweep
-SCAN_PATTERNS = ("bidir-scan", "heads-scan", "feed-scan")
+SCAN_PATTERNS = ("bidir-scan", "heads-scan", "feed-scan", "wedge-scan")
+WEDGE_STEPS = (0, 26, 51, 77, 102, 128, 153, 179, 204, 230, 255)   # 0, 10 %, ... 100 %
+WEDGE_STROKES = 2        # one pass: the wedge is two strokes tall (about 35 mm)
+WEDGE_GAP_UM = 1000.0    # paper between patches
+WEDGE_DITHER = "vced"    # the RIP's default halftone
 
 
 @dataclass(frozen=True)
@@ -155,6 +163,8 @@ def scan_layout(kind: str, profile: Profile, width: int, dpi: int = 150) -> Scan
         bars = (Mark("bar", "K", 3, 0, 0, 0, check.height, b0, b1),
                 Mark("bar", "K", 3, 0, 0, 0, check.height, b2, b3))
         return ScanLayout(kind, planes, bars, tuple(marks), a)
+    if kind == "wedge-scan":
+        return _wedge_layout(profile, width, dpi)
     if kind not in SCAN_PATTERNS:
         raise ValueError(f"not a scan pattern: {kind!r} (one of nozzle-check, {', '.join(SCAN_PATTERNS)})")
     col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
@@ -218,6 +228,41 @@ def scan_layout(kind: str, profile: Profile, width: int, dpi: int = 150) -> Scan
                     planes[r, c0:c1, h.channel] = 1
         bars.append(Mark("bar", "K", 3, 0, 0, 0, a, c0, c1))
     return ScanLayout(kind, planes, tuple(bars), tuple(marks), a)
+
+
+def _wedge_layout(profile: Profile, width: int, dpi: int) -> ScanLayout:
+    """Four rows of patches (C, M, Y, K), one per WEDGE_STEPS amount, halftoned through the
+    profile's curves and drop budget; K bars over every row at both ends.  Mark.nozzle
+    holds the step's nominal amount."""
+    from .halftone import Halftoner
+    from .pipeline import profile_curves
+    from .profile import COLORS
+    s0, s1 = profile.usable_slots()
+    rows = WEDGE_STROKES * (s1 - s0)
+    col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
+    bar, gap = _cols(BAR_UM, col_um), _cols(BAR_GAP_UM, col_um)
+    inner0, inner1 = bar + gap, width - bar - gap
+    pitch = (inner1 - inner0) // len(WEDGE_STEPS)
+    pgap, rgap = _cols(WEDGE_GAP_UM, col_um), max(1, int(round(WEDGE_GAP_UM / 2 / profile.row_um)))
+    if pitch < 3 * pgap:
+        raise ValueError(f"wedge-scan needs at least "
+                         f"{(2 * (BAR_UM + BAR_GAP_UM) + len(WEDGE_STEPS) * 3 * WEDGE_GAP_UM) / 1000:.0f} mm")
+    lut = profile_curves(profile, dpi)
+    amounts = np.zeros((rows, width, 4), np.uint8)
+    marks = []
+    for ch in range(4):
+        r0, r1 = ch * rows // 4 + rgap, (ch + 1) * rows // 4 - rgap
+        for i, v in enumerate(WEDGE_STEPS):
+            c0 = inner0 + i * pitch + pgap // 2
+            c1 = c0 + pitch - pgap
+            amounts[r0:r1, c0:c1, ch] = v if lut is None else lut[ch, v]
+            marks.append(Mark("patch", COLORS[ch], ch, 0, v, r0, r1, c0, c1))
+    planes = Halftoner(WEDGE_DITHER, width).process(amounts)
+    bars = []
+    for c0, c1 in ((0, bar), (width - bar, width)):
+        planes[:, c0:c1, 3] = 1
+        bars.append(Mark("bar", "K", 3, 0, 0, 0, rows, c0, c1))
+    return ScanLayout("wedge-scan", planes, tuple(bars), tuple(marks), s1 - s0)
 
 
 def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",

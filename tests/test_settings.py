@@ -90,7 +90,8 @@ def test_dpi_choices_come_from_the_printer_profile(tmp_path):
     text = DEFAULT_PROFILE.read_text()
     for a, b in (("dpi_modes = [150, 300, 600]", "dpi_modes = [150, 300]"),
                  ("{ 150 = 0, 300 = 0, 600 = 0 }", "{ 150 = 0, 300 = 0 }"),
-                 ("{ 150 = 660.0, 300 = 660.0, 600 = 330.0 }", "{ 150 = 660.0, 300 = 660.0 }")):
+                 ("{ 150 = 660.0, 300 = 660.0, 600 = 330.0 }", "{ 150 = 660.0, 300 = 660.0 }"),
+                 ("{ 150 = 1.0, 300 = 1.0, 600 = 1.0 }", "{ 150 = 1.0, 300 = 1.0 }")):
         assert a in text
         text = text.replace(a, b)
     path = tmp_path / "two-modes.toml"
