@@ -869,7 +869,10 @@ auth_cb(pappl_client_t *client, const char *group, gid_t groupid, void *cb_data)
   (void)cb_data;
 
   if (!authorization || strncmp(authorization, "Basic ", 6))
+  {
+    papplLogClient(client, PAPPL_LOGLEVEL_DEBUG, "No Basic authorization (%s).", authorization ? authorization : "none");
     return (HTTP_STATUS_UNAUTHORIZED);
+  }
   for (authorization += 6; *authorization == ' '; authorization ++);
   httpDecode64_2(userpass, &len, authorization);
   userpass[len >= 0 && len < (int)sizeof(userpass) ? len : (int)sizeof(userpass) - 1] = '\0';
@@ -920,6 +923,7 @@ driver_cb(pappl_system_t *system, const char *driver_name, const char *device_ur
   int		i;
   static const struct { const char *name; int w, l; } sizes[] =
   {					// standard sizes offered when the roll is wide enough
+    { "na_index-4x6_4x6in", 102, 152 },
     { "iso_a4_210x297mm", 210, 297 },
     { "na_letter_8.5x11in", 216, 279 },
     { "iso_a3_297x420mm", 297, 420 },
