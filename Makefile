@@ -7,6 +7,9 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    := out
 SAMPLE := resources/samples/sample.tif
+# the IPP Everywhere Printer Application (docs/ipp.md): C against PAPPL (libpappl-dev)
+IPP_BIN := app/ipp/wideprint-ipp
+IPP_SRC := app/ipp/wideprint-ipp.c
 
 .PHONY: demo test install bench clean
 
@@ -18,7 +21,11 @@ $(STAMP): setup.cfg pyproject.toml constraints.txt
 	$(BIN)/python -m wideprint.app.warmup
 	touch $(STAMP)
 
-install: $(STAMP)
+$(IPP_BIN): $(IPP_SRC)
+	@pkg-config --exists pappl || { echo "make: $(IPP_BIN) needs PAPPL: apt-get install libpappl-dev pkg-config (resources/debian-packages.txt; .ci/run installs them)" >&2; exit 1; }
+	$(CC) -Wall -Wextra -O2 -o $@ $< $$(pkg-config --cflags --libs pappl) -ltiff -lpthread
+
+install: $(STAMP) $(IPP_BIN)
 
 demo: $(STAMP)
 	mkdir -p $(OUT)
@@ -29,11 +36,11 @@ demo: $(STAMP)
 	$(BIN)/python -m wideprint.app.compare $(OUT)/media.tif $(OUT)/planes.tif
 	@echo "demo: media $(OUT)/media.tif (picture $(OUT)/media.png), report $(OUT)/report.json, events $(OUT)/events.jsonl"
 
-test: $(STAMP)
+test: $(STAMP) $(IPP_BIN)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py
 
 clean:
-	rm -rf $(OUT) .pytest_cache
+	rm -rf $(OUT) .pytest_cache $(IPP_BIN)

@@ -342,11 +342,49 @@ def cmd_serve(args) -> int:
             print("wideprint serve: --keep-failed must be 0 or more days", file=sys.stderr)
             return EXIT_USAGE
         cfg.keep_failed_s = args.keep_failed * 86400
+    ipp = _IppStarter(args) if args.ipp or args.ipp_listen else None
     try:
-        return serve(cfg)
+        rc = serve(cfg, ready=ipp.start if ipp else None)
     except (ValueError, OSError) as exc:
         print(f"wideprint serve: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        if ipp:
+            ipp.stop()
+    return EXIT_FAILED if ipp and ipp.failed else rc
+
+
+class _IppStarter:
+    """`serve --ipp`: the IPP Everywhere Printer Application beside the server (docs/ipp.md);
+    a Printer Application that cannot start stops the server, loudly."""
+
+    def __init__(self, args):
+        self.args, self.bridge, self.failed = args, None, False
+
+    def start(self, server) -> None:
+        from .ipp import IppBridge
+        a = self.args
+        listen = a.ipp_listen or "localhost"
+        if listen not in ("localhost", "127.0.0.1", "::1"):
+            print(f"wideprint serve: the IPP printers listen on {listen}, beyond this machine"
+                  + ("" if a.ipp_auth == "token" else ", and anyone who reaches them can print"),
+                  file=sys.stderr, flush=True)
+        try:
+            self.bridge = IppBridge(server.state_dir, listen=listen, port=a.ipp_port,
+                                    auth=a.ipp_auth, url=server.url, token=server.token)
+            uris = self.bridge.start()
+        except (RuntimeError, OSError, ValueError) as exc:
+            print(f"wideprint serve: --ipp: {exc}", file=sys.stderr, flush=True)
+            self.failed = True
+            server.stop_requested.set()
+            return
+        server.publish(ipp=uris)
+        for name, uri in uris.items():
+            print(f"wideprint serve: IPP printer {name}: {uri}", flush=True)
+
+    def stop(self) -> None:
+        if self.bridge:
+            self.bridge.stop()
 
 
 def _settings_from(args) -> dict:
@@ -567,6 +605,7 @@ def add_parser(sub) -> None:
     from .server.config import (DEFAULT_API_CONNECTIONS, DEFAULT_API_TIMEOUT_S, DEFAULT_PORT,
                                 DEFAULT_SETTLE_S)
     from ..rip.settings import add_arguments as add_settings_arguments
+    from .ipp.bridge import DEFAULT_IPP_PORT
 
     p = sub.add_parser("serve", help="run the print server: queue, API, hot folders")
     p.add_argument("--device", default="emulator",
@@ -611,6 +650,17 @@ def add_parser(sub) -> None:
     p.add_argument("--inject", action="append", metavar="KIND=VALUE",
                    help="an emulator fault for every emulated printer (tests, demos, training; "
                         "kinds as for `wideprint print --inject`)")
+    p.add_argument("--ipp", action="store_true",
+                   help="also run the IPP Everywhere Printer Application: every printer becomes "
+                        "a driverless IPP printer (docs/ipp.md); its URIs go to server.json")
+    p.add_argument("--ipp-listen", metavar="ADDR",
+                   help="address of the IPP printers (default localhost; '*' = every address: "
+                        "the network); implies --ipp")
+    p.add_argument("--ipp-port", type=int, default=DEFAULT_IPP_PORT, metavar="N",
+                   help=f"port of the IPP printers (default {DEFAULT_IPP_PORT})")
+    p.add_argument("--ipp-auth", choices=("token", "none"), default="token",
+                   help="token (default): IPP clients authenticate with the API token as "
+                        "password (Basic); none: whoever reaches the port may print")
     p.add_argument("--verbose-server", action="store_true", help="debug logging")
     p.set_defaults(func=cmd_serve)
 

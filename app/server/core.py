@@ -182,8 +182,14 @@ class PrintServer:
         self._http_thread.start()
         if self.hot:
             self.hot.start()
+        self.publish()
+
+    def publish(self, **extra) -> None:
+        """(Re)write server.json: the URL clients find the server at, plus what front ends
+        started beside it add (`ipp`: each printer's IPP URI, docs/ipp.md)."""
+        self._published = dict(getattr(self, "_published", {}), **extra)
         info = dict(url=self.url, pid=os.getpid(), started=self.started,
-                    device=self.config.device, state_dir=str(self.state_dir))
+                    device=self.config.device, state_dir=str(self.state_dir), **self._published)
         tmp = self.state_dir / (SERVER_FILE + ".tmp")
         tmp.write_text(json.dumps(info) + "\n")
         os.replace(tmp, self.state_dir / SERVER_FILE)
