@@ -856,6 +856,22 @@ reader_thread(void *data)		// lines from the bridge; EOF: the bridge is gone, st
 // -- authentication: the API's token ----------------------------------------------------------
 
 static http_status_t
+unauthorized(pappl_client_t *client)	// 401, after reading what the client is still sending
+{
+  // PAPPL answers "100 Continue" before it reads the IPP request, so a client printing a
+  // document is still sending it when the 401 goes out; reading the rest of the document
+  // first lets the client see the 401 and repeat the request with its credentials (else a
+  // large document meets a closed connection: "Unable to finish request").  Only requests
+  // that carry a document: flushing one without made ipptool retry without credentials.
+  ipp_op_t op = papplClientGetOperation(client);
+
+  if (op == IPP_OP_PRINT_JOB || op == IPP_OP_SEND_DOCUMENT)
+    httpFlush(papplClientGetHTTP(client));
+  return (HTTP_STATUS_UNAUTHORIZED);
+}
+
+
+static http_status_t
 auth_cb(pappl_client_t *client, const char *group, gid_t groupid, void *cb_data)
 {
   const char	*authorization = httpGetField(papplClientGetHTTP(client), HTTP_FIELD_AUTHORIZATION);
@@ -871,20 +887,20 @@ auth_cb(pappl_client_t *client, const char *group, gid_t groupid, void *cb_data)
   if (!authorization || strncmp(authorization, "Basic ", 6))
   {
     papplLogClient(client, PAPPL_LOGLEVEL_DEBUG, "No Basic authorization (%s).", authorization ? authorization : "none");
-    return (HTTP_STATUS_UNAUTHORIZED);
+    return (unauthorized(client));
   }
   for (authorization += 6; *authorization == ' '; authorization ++);
   httpDecode64_2(userpass, &len, authorization);
   userpass[len >= 0 && len < (int)sizeof(userpass) ? len : (int)sizeof(userpass) - 1] = '\0';
   if ((password = strchr(userpass, ':')) == NULL)
-    return (HTTP_STATUS_UNAUTHORIZED);
+    return (unauthorized(client));
   password ++;
   plen = strlen(password);
   // constant time in the token's length
   for (i = 0; i < tlen; i ++)
     diff |= (unsigned char)(wp.token[i] ^ (i < plen ? password[i] : 0));
   if (diff || plen != tlen)
-    return (HTTP_STATUS_UNAUTHORIZED);
+    return (unauthorized(client));
   return (HTTP_STATUS_CONTINUE);
 }
 
