@@ -31,8 +31,14 @@ from wideprint.rip.profile import load_profile
 
 BINARY = find_binary()
 IPPTOOL_DIR = Path("/usr/share/cups/ipptool")
-pytestmark = pytest.mark.skipif(BINARY is None, reason="the Printer Application is not built "
-                                "(make install builds it when libpappl-dev is installed)")
+
+
+@pytest.fixture(autouse=True)
+def _built():
+    """`make test` builds the Printer Application first: without it the set-up is broken."""
+    if BINARY is None:
+        pytest.fail("the Printer Application is not built: `make test` (or make install) builds "
+                    "app/ipp/wideprint-ipp from libpappl-dev (resources/debian-packages.txt)")
 
 
 def _free_port() -> int:
