@@ -561,14 +561,8 @@ def cmd_emulator(args) -> int:
 
 
 def cmd_gui(args) -> int:
-    from .gui import main as gui_main      # it says so if PySide6 is missing
-    argv = list(args.files)
-    for opt in ("state_dir", "device", "config_dir"):
-        if getattr(args, opt):
-            argv += ["--" + opt.replace("_", "-"), getattr(args, opt)]
-    if args.verbose_gui:
-        argv.append("--verbose")
-    return gui_main(argv)
+    from .gui import run as gui_run        # it says so if PySide6 is missing
+    return gui_run(args)
 
 
 def cmd_devices(args) -> int:
@@ -688,15 +682,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("gui", help="the operator GUI (PySide6), a client of this machine's print "
                                    "server (started in the background when none runs)")
-    p.add_argument("files", nargs="*", metavar="FILE", help="files to send to the server's queue")
-    p.add_argument("--state-dir", metavar="DIR",
-                   help="the print server's state directory (default: $WIDEPRINT_STATE_DIR, "
-                        "else the user's)")
-    p.add_argument("--device", help="the printer of a server the GUI starts (default: the saved "
-                                    "setting, 'emulator')")
-    p.add_argument("--config-dir", metavar="DIR", help="the GUI's own settings folder")
-    p.add_argument("-v", "--verbose", dest="verbose_gui", action="store_true",
-                   help="debug messages in the log")
+    from .gui import add_arguments as add_gui_arguments   # argparse only: --help stays light
+    add_gui_arguments(p)
     p.set_defaults(func=cmd_gui)
 
     from .server_cli import add_parser as add_server_parsers

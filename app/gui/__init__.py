@@ -10,11 +10,8 @@ import logging
 import sys
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="wideprint gui",
-        description="The wideprint operator GUI: a client of the print server of this machine "
-                    "(started in the background when none runs); FILEs go to its queue.")
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """The GUI's options, for `wideprint gui` (app/cli.py) and `python -m` alike."""
     ap.add_argument("files", nargs="*", metavar="FILE", help="files (or folders) to send to the queue")
     ap.add_argument("--state-dir", metavar="DIR",
                     help="the print server's state directory (default: $WIDEPRINT_STATE_DIR, "
@@ -25,12 +22,24 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--config-dir", metavar="DIR",
                     help="the GUI's own settings (default: $WIDEPRINT_CONFIG_DIR, else the user's "
                          "config dir)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="debug messages in the log")
+    ap.add_argument("-v", "--verbose", dest="verbose_gui", action="store_true",
+                    help="debug messages in the log")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="wideprint gui",
+        description="The wideprint operator GUI: a client of the print server of this machine "
+                    "(started in the background when none runs); FILEs go to its queue.")
+    add_arguments(ap)
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    return run(build_parser().parse_args(sys.argv[1:] if argv is None else argv))
+
+
+def run(args: argparse.Namespace) -> int:
     import os
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
             or os.environ.get("QT_QPA_PLATFORM")):
@@ -51,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     from .main_window import MainWindow
     from .server_link import ServerLink, find_or_start
 
-    logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose else logging.INFO)
+    logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose_gui else logging.INFO)
     app = QApplication.instance() or QApplication(["wideprint"])
     app.setApplicationName("wideprint")
     app.setOrganizationName("wideprint")
@@ -75,4 +84,4 @@ def main(argv: list[str] | None = None) -> int:
     return int(app.exec())
 
 
-__all__ = ["main"]
+__all__ = ["add_arguments", "main", "run"]
