@@ -19,7 +19,7 @@ import threading
 from collections import OrderedDict
 from pathlib import Path
 
-from .validate import Invalid, rip_settings
+from .validate import Invalid, rip_settings, with_icc_paths
 
 log = logging.getLogger("wideprint.server")
 
@@ -63,10 +63,7 @@ class Previews:
         path = job.get("spool_path")
         if not path or not os.path.exists(path):
             raise Invalid(f"job {job['id']}: its file is no longer spooled (no preview)", 410)
-        settings = dict(job["settings"])
-        for k in ("input_icc", "output_icc"):
-            if settings.get(k):
-                settings[k] = str(self.srv.state_dir / "icc" / settings[k])
+        settings = with_icc_paths(job["settings"], self.srv.state_dir / "icc")
         with self._one:
             try:
                 pd = compute_preview(path, rip_settings(settings), self._profile(job),

@@ -275,13 +275,9 @@ class Spool:
             row = self.db.execute("SELECT * FROM jobs WHERE state='queued' AND nested_in IS NULL "
                                   f"{self.QUEUE_ORDER} LIMIT 1"
                                   ).fetchone()
-        else:
-            row = self.db.execute(
-                "SELECT * FROM jobs WHERE state='queued' AND nested_in IS NULL "
-                "AND (printer IS NULL OR printer=?) "
-                "AND (interrupted=0 OR printed_on IS NULL OR printed_on=?) "
-                f"{self.QUEUE_ORDER} LIMIT 1", (printer, printer)).fetchone()
-        return _job_dict(row) if row else None
+            return _job_dict(row) if row else None
+        jobs = self.next_jobs(printer, 1)
+        return jobs[0] if jobs else None
 
     def queue_position(self) -> dict[int, int]:
         rows = self.db.execute("SELECT id FROM jobs WHERE state='queued' AND nested_in IS NULL "

@@ -70,6 +70,16 @@ def validate_settings(raw, profile, icc_dir: Path | None = None) -> dict:
     return out
 
 
+def with_icc_paths(settings: dict, icc_dir: Path) -> dict:
+    """A job's settings with its ICC profiles (plain names in the server's icc/ folder, as
+    validate_settings accepts them) as the paths the RIP opens."""
+    out = dict(settings)
+    for key in ("input_icc", "output_icc"):
+        if out.get(key):
+            out[key] = str(Path(icc_dir) / out[key])
+    return out
+
+
 def rip_settings(settings: dict):
     """RipSettings from validated settings (placement given as a JSON object)."""
     from ...rip.settings import from_mapping

@@ -14,7 +14,7 @@ import time
 from typing import TYPE_CHECKING
 
 from .spool import COLORS
-from .validate import rip_settings
+from .validate import rip_settings, with_icc_paths
 
 if TYPE_CHECKING:
     from .core import PrintServer
@@ -284,7 +284,7 @@ class Worker(threading.Thread):
                 return group
         if length:
             from ...rip.layout import plan_layout
-            from .validate import rip_settings
+            from .validate import rip_settings, with_icc_paths
             try:
                 plan = plan_layout([j["spool_path"] for j in group], rip_settings(first["settings"]),
                                    self.profile, self.paper_mm)
@@ -367,11 +367,7 @@ class Worker(threading.Thread):
                             strokes_total=job["strokes_total"], strokes_printed=job["strokes_done"],
                             resumed=resumed)
         self.printer_state = "printing"
-        settings = dict(job["settings"])
-        icc = self.srv.state_dir / "icc"
-        for k in ("input_icc", "output_icc"):
-            if settings.get(k):
-                settings[k] = str(icc / settings[k])
+        settings = with_icc_paths(job["settings"], self.srv.state_dir / "icc")
         first = True
         layout = None
         while job["copies_done"] < job["copies"]:
