@@ -228,12 +228,16 @@ def _layout_preview(job, pw: int, ph: int, copies: int, max_px: int, cancelled):
         key = (it.path, it.turn)
         if key not in cache:
             rs = item_settings(job.settings, it.turn)
-            # the whole placed item, at the sheet's preview scale
-            probe = RipJob(it.path, rs, job.profile)
-            try:
-                iw, ih = probe.width, probe.height
-            finally:
-                probe.close()
+            # the whole placed item, at the sheet's preview scale (a tile's item is its whole
+            # image: only then is the file opened to learn that size)
+            if it.crop is None:
+                iw, ih = it.width, it.height
+            else:
+                probe = RipJob(it.path, rs, job.profile)
+                try:
+                    iw, ih = probe.width, probe.height
+                finally:
+                    probe.close()
             side = max(1, int(round(max(iw * sx, ih * sy))))
             sub = compute_preview(it.path, rs, job.profile, 1, max_px=max(8, min(max_px, side)))
             cache[key] = (sub, iw, ih)
