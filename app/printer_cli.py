@@ -1,4 +1,5 @@
-"""`wideprint printer status|home|park|feed MM|measure|clear-fault`: the machine commands
+"""`wideprint printer status|home|park|feed MM|measure|clear-fault|spit|purge|cap|uncap`:
+the machine commands
 of the printer API (driver/printer.py) from the command line, on a real link or the
 emulator (docs/driver.md, "The printer API").
 
@@ -14,13 +15,14 @@ import json
 import sys
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
-ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault")
+ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault",
+           "spit", "purge", "cap", "uncap")          # the last four: head care (protocol 2.9)
 
 
 def add_parser(sub) -> None:
     from . import devices
     p = sub.add_parser("printer", help="printer status and machine commands (home, park, "
-                       "feed, measure the paper, clear a fault)",
+                       "feed, measure the paper, clear a fault, spit, purge, cap)",
                        description="Status and machine commands of one printer, through the "
                        "driver's printer API.")
     p.add_argument("action", choices=ACTIONS)
@@ -30,6 +32,12 @@ def add_parser(sub) -> None:
     p.add_argument("--profile", metavar="TOML", help="printer profile")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE",
                    help="emulator fault (docs/emulator.md)")
+    p.add_argument("--heads", metavar="C1,M2,...",
+                   help="spit, purge: only these heads (default: all)")
+    p.add_argument("--drops", type=int, metavar="N",
+                   help="spit: drops per nozzle (default: the profile's spit_drops)")
+    p.add_argument("--ms", type=int, metavar="MS",
+                   help="purge: pump time in ms (default: the profile's purge_ms)")
     p.add_argument("--json", action="store_true", help="status as JSON")
     p.set_defaults(func=cmd_printer)
 
@@ -55,6 +63,11 @@ def status_dict(printer) -> dict:
                             configured=h.configured, overtemp=h.overtemp, dead=h.dead)
                for h in printer.heads()},
         fault=printer.fault_text(st) or None)
+    if (info.get("proto_major"), info.get("proto_minor", 0)) >= (1, 1):
+        svc = printer.call(P.Op.SERVICE_STATUS)
+        out["capped"] = bool(svc.capped)
+        out["since_spit_s"] = {h.name: (None if a == 0xFFFFFFFF else round(a / 1000, 1))
+                               for h, a in zip(printer.profile.heads, svc.spit_age_ms)}
     if flags["paper_measured"]:
         paper = printer.paper()
         out["paper"] = dict(present=paper.present, width_mm=round(paper.width_mm, 1),
@@ -75,7 +88,28 @@ def _print_status(d: dict) -> None:
                                 + ("" if h["configured"] else " (not configured)")
                                 for n, h in d["heads"].items()))
     print("FIFO words: " + ", ".join(f"{n} {w}" for n, w in d["fifo_words"].items()))
+    if "capped" in d:
+        print(f"heads {'capped' if d['capped'] else 'uncapped'}; since the last spit: "
+              + ", ".join(f"{n} {'never' if s is None else f'{s} s'}"
+                          for n, s in d["since_spit_s"].items()))
     print(f"fault: {d['fault'] or 'none'}")
+
+
+def head_mask(profile, names: str | None) -> int:
+    """`C1,M2` -> the heads' bit mask (docs/protocol.md 2.9); None: every head."""
+    heads = {h.name: h.index for h in profile.heads}
+    if not names:
+        return (1 << len(heads)) - 1
+    mask = 0
+    for name in (n.strip() for n in names.split(",")):
+        if name not in heads:
+            raise ValueError(f"--heads: no head {name!r} (heads: {', '.join(heads)})")
+        mask |= 1 << heads[name]
+    return mask
+
+
+def _names(profile, mask: int) -> str:
+    return ", ".join(h.name for h in profile.heads if mask >> h.index & 1)
 
 
 def _again(printer, step, tries: int = 3):
@@ -102,12 +136,14 @@ def cmd_printer(args) -> int:
     from ..driver.link import DeviceError, LinkError
     from ..driver.printer import Printer, PrinterFault
     from ..rip.profile import load_profile
+    from ..driver.headcare import HeadCare
     from .devices import close_device, is_emulator_spec, open_device
     if (args.action == "feed") != (args.mm is not None):
         print("wideprint printer: feed takes a length in mm (and only feed does)", file=sys.stderr)
         return EXIT_USAGE
     try:
         profile = load_profile(args.profile)
+        mask = head_mask(profile, args.heads)
         faults = None
         if args.inject:
             if not is_emulator_spec(args.device):
@@ -142,6 +178,13 @@ def cmd_printer(args) -> int:
             return EXIT_FAILED
         if not st.flags & P.FLAG_ENABLED:
             _again(printer, printer.enable)
+        if args.action == "uncap" or (st.flags & P.FLAG_CAPPED and args.action != "cap"):
+            print("uncapping")               # before anything moves: protocol 2.9
+            _again(printer, lambda: HeadCare(printer).cap(False))
+            if args.action == "uncap":
+                return EXIT_OK
+            print("uncapping")
+            _again(printer, lambda: HeadCare(printer).cap(False))
         if args.action == "home" or not st.flags & P.FLAG_HOMED:
             print("homing")
             _again(printer, printer.home)
@@ -157,6 +200,19 @@ def cmd_printer(args) -> int:
             target = printer.status().paper_steps + steps       # absolute: safe to repeat
             _again(printer, lambda: printer.feed_to(target))
             print(f"fed {steps * profile.feed_um_per_step / 1000:.3f} mm ({steps} steps)")
+        elif args.action == "cap":
+            _again(printer, lambda: HeadCare(printer).cap(True))
+            print("parked and capped")
+        elif args.action == "spit":
+            care = HeadCare(printer)
+            drops = args.drops or profile.maintenance.spit_drops
+            _again(printer, lambda: care.spit(mask, drops))
+            print(f"spat {drops} drops per nozzle: heads {_names(profile, mask)}")
+        elif args.action == "purge":
+            care = HeadCare(printer)
+            ms = args.ms or profile.maintenance.purge_ms
+            _again(printer, lambda: care.purge(mask, ms))
+            print(f"purged {ms} ms and wiped: heads {_names(profile, mask)}")
         return EXIT_OK
     except LinkError as exc:
         print(f"wideprint printer: {exc}", file=sys.stderr)

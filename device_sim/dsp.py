@@ -231,12 +231,16 @@ class Dsp:
     # motion commands: also refused when not enabled or busy
     @handles(P.Op.HOME, MOVES)
     def home(self):
+        if self.printer.service.capped:
+            return P.Result.BAD_STATE
         self.printer.home()
         return P.Result.OK
 
     # and when not homed
     @handles(P.Op.MEASURE_PAPER, NEEDS_HOME)
     def measure_paper(self):
+        if self.printer.service.capped:
+            return P.Result.BAD_STATE
         self.printer.measure_paper()
         return P.Result.OK
 
@@ -261,5 +265,26 @@ class Dsp:
 
     @handles(P.Op.START_LINE, NEEDS_HOME)
     def start_line(self):
+        if self.printer.service.capped:
+            return P.Result.BAD_STATE
         code = self.printer.start_line()
         return dict(stroke=self.printer.fpga.stroke) if code == P.Result.OK else code
+
+    # head care (section 2.9)
+    @handles(P.Op.SPIT, NEEDS_HOME)
+    def spit(self, drops, heads):
+        return self.printer.spit(drops, heads)
+
+    @handles(P.Op.PURGE, NEEDS_HOME)
+    def purge(self, ms, heads):
+        return self.printer.purge(ms, heads)
+
+    @handles(P.Op.CAP, MOVES)
+    def cap(self, on):
+        if on and not self.printer.homed:    # capping moves to the park position
+            return P.Result.NOT_HOMED
+        return self.printer.cap(on)
+
+    @handles(P.Op.SERVICE_STATUS)
+    def service_status(self):
+        return self.printer.service.status()

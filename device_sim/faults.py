@@ -37,6 +37,10 @@ KINDS = {
     "pci-dma-abort": "PCI card: the N-th block's DMA is aborted half-way (master abort)",
     "pci-irq-miss": "PCI card: each interrupt is lost with this probability",
     "pci-bus-stall": "PCI card: N:SECONDS: the N-th block's DMA is held off that long",
+    "idle-time-scale": "head care: each second the printer stands idle counts this many on the "
+                       "drying clock (a long pause in a short test, docs/emulator.md)",
+    "dry-nozzle": "HEAD:NOZZLE that has dried (misfires until spat or purged; repeatable)",
+    "clogged-nozzle": "HEAD:NOZZLE that has clogged (misfires until purged; repeatable)",
     "seed": "random seed for the injected faults and the scanner's noise",
 }
 
@@ -109,6 +113,9 @@ class Faults:
     pci_dma_abort: int | None = None
     pci_irq_miss: float = 0.0
     pci_bus_stall: tuple | None = None                   # (block number, seconds)
+    idle_time_scale: float = 1.0
+    dry_nozzle: list = field(default_factory=list)       # [(head name, nozzle)]
+    clogged_nozzle: list = field(default_factory=list)   # [(head name, nozzle)]
     seed: int = 1
 
     @classmethod
@@ -123,7 +130,7 @@ class Faults:
             if attr not in names or kind.strip() not in KINDS:
                 raise ValueError(f"--inject {kind!r}: unknown fault; kinds: {', '.join(KINDS)}")
             try:
-                if attr in ("dead_nozzle", "overtemp", "head_error"):
+                if attr in ("dead_nozzle", "overtemp", "head_error", "dry_nozzle", "clogged_nozzle"):
                     head, num = value.split(":")
                     getattr(f, attr).append((head.strip(), int(num)))
                 elif attr == "host_jitter":

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import time as wallclock
 from collections import deque
 from pathlib import Path
 from typing import Callable
@@ -29,6 +30,7 @@ from .media import Media
 from .motion import Trapezoid, ramp_counts
 from .physical import JobGeometry, PhysicalModel, dot_diameter_um
 from .servo import ServoMove, ServoParams
+from .service import ServiceStation
 from .stepper import feed_move
 
 PCI_BYTES_S = 60e6           # effective PLX9054 DMA rate (33 MHz, 32 bit, with overhead)
@@ -116,6 +118,10 @@ class Printer:
         self.record_latched = record_latched
         self.latched: dict[int, list] = {}
         self.events: deque = deque(maxlen=200_000)
+        # the service station and the ink's drying (docs/protocol.md 2.9)
+        self.service = ServiceStation(self, self.n_heads, prof.nozzles, prof.maintenance,
+                                      self.faults)
+        self._wall_last: float | None = None     # when the host last spoke (idle time)
 
     # -- bookkeeping ------------------------------------------------------------------------
     def log(self, event: str, **fields) -> None:
@@ -168,6 +174,10 @@ class Printer:
     def serial_in(self, data: bytes, gap: bool = True) -> bytes:
         """Bytes from the host; `gap` says the line was idle before them for longer than
         the DSP's inter-frame timeout."""
+        now = wallclock.monotonic()
+        if self._wall_last is not None and not self.busy() and self.motion == P.Motion.IDLE:
+            self.service.idle(now - self._wall_last)    # the printer stood still meanwhile
+        self._wall_last = now
         data = self._noise(data)
         self.log("serial_rx", hex=data.hex())
         return self._noise(self.dsp.receive(data, gap))
@@ -302,7 +312,8 @@ class Printer:
                         (self.paper_measured, P.FLAG_PAPER_MEASURED),
                         (self.line_done, P.FLAG_LINE_DONE), (self.feed_done, P.FLAG_FEED_DONE),
                         (self.job is not None, P.FLAG_JOB_OPEN),
-                        (self.fault != P.Fault.NONE, P.FLAG_FAULT)):
+                        (self.fault != P.Fault.NONE, P.FLAG_FAULT),
+                        (self.service.capped, P.FLAG_CAPPED)):
             if on:
                 flags |= bit
         motion = P.Motion.PRINTING if self.busy() else self.motion
@@ -342,6 +353,38 @@ class Printer:
 
     def park(self) -> P.Result:
         self._move_to(float(self.profile.carriage.park_counts) + self.count_offset)
+        return P.Result.OK
+
+    # -- the service station (docs/protocol.md 2.9) ---------------------------------------------
+    def _masked(self, mask: int) -> list[int]:
+        return [h for h in range(self.n_heads) if mask >> h & 1]
+
+    def spit(self, drops: int, mask: int) -> P.Result:
+        heads = self._masked(mask)
+        if not 1 <= drops <= 10000 or not heads:
+            return P.Result.BAD_ARGUMENT
+        if self.service.capped:
+            return P.Result.BAD_STATE
+        self.park()
+        printing = np.ones(self.profile.nozzles, bool)
+        printing[list(self.profile.head.dead_end_nozzles)] = False
+        self.service.spit(heads, drops, printing)
+        return P.Result.OK
+
+    def purge(self, ms: int, mask: int) -> P.Result:
+        heads = self._masked(mask)
+        if not 100 <= ms <= 10000 or not heads:
+            return P.Result.BAD_ARGUMENT
+        self.park()
+        self.service.purge(heads, ms)
+        return P.Result.OK
+
+    def cap(self, on: int) -> P.Result:
+        if on not in (0, 1):
+            return P.Result.BAD_ARGUMENT
+        if on:
+            self.park()
+        self.service.cap(bool(on))
         return P.Result.OK
 
     def feed(self, steps: int, profile: int, vmax: int, acc: int) -> P.Result:
@@ -572,6 +615,7 @@ class Printer:
         prof, job = self.profile, self.job
         hd = self.heads[head]
         hd.fires += columns.size
+        words = self.service.misfire(head, words)       # dried or clogged nozzles
         if hd.dead:
             words = words.copy()
             for z in hd.dead:                      # a dead nozzle never drops

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import protocol as P
 from .device import Device
+from .headcare import HeadCare, nozzles_used
 from .link import DeviceError, LineTooNoisy, LinkError
 from .printer import Printer, PrinterFault, fault_message  # noqa: F401 - fault_message: re-exported
 from .stream import StreamError, StrokeStreamer
@@ -71,9 +72,12 @@ class JobControl:
         self.estop_requested.set()
         self.cancel()
 
-    def wait_while_paused(self) -> None:
-        while not self._run.wait(0.1):
-            pass
+    def wait_while_paused(self, tick=None, every: float = 0.25) -> None:
+        """Block while paused; `tick()` is called every `every` seconds meanwhile (head
+        care keeps the nozzles wet)."""
+        while not self._run.wait(every):
+            if tick is not None:
+                tick()
 
 
 @dataclass
@@ -118,6 +122,7 @@ class JobReport:
     retries: int = 0
     recoveries: int = 0
     min_fifo_words: int | None = None
+    spits: int = 0                   # head care: spits during the job (docs/driver.md)
     wall_s: float = 0.0
     message: str = ""
 
@@ -128,11 +133,13 @@ class JobReport:
 class PrintJob:
     def __init__(self, device: Device, rip: RipJob, job_id: int = 1, on_event=None,
                  speed_mm_s: float | None = None, allow_overspeed: bool = False,
-                 resume: dict | None = None):
+                 resume: dict | None = None, head_care: HeadCare | None = None):
         """resume: a checkpoint from an earlier run of the same job on the same printer
         (the `checkpoint` event / attribute): placement, paper origin and the next stroke;
         strokes before it are not printed again.  A checkpoint from an older version names
-        the next stroke `next_pass`; it is read the same."""
+        the next stroke `next_pass`; it is read the same.  head_care: the printer's
+        schedule kept by whoever holds the printer between jobs (a print server's worker);
+        default: one for this job."""
         self.dev = device
         self.resume = resume
         self.checkpoint: dict = {}
@@ -148,6 +155,7 @@ class PrintJob:
         self.control = JobControl()
         self.telemetry = Telemetry()
         self.printer = Printer(device, on_status=self._seen)   # every status read feeds the telemetry
+        self.care = head_care
         self._state("queued")
 
     # -- telemetry --------------------------------------------------------------------------
@@ -413,6 +421,9 @@ class PrintJob:
             self.line_speed()
             self._state("connecting")
             self._recovering(self.prepare, "connecting")
+            if self.care is None:
+                self.care = HeadCare(self.printer)
+            spits0 = self.care.spits
             self._read_head_temps()
             self._state("printing")
             x0 = self.resume["x0"] if self.resume else self._recovering(self.place, "placing the job")
@@ -440,7 +451,12 @@ class PrintJob:
                 self._recovering(lambda: self.feed_to(target), f"feed before stroke {stroke.index}")
                 self.on_event("stroke", index=stroke.index, total=planner.total_strokes,
                               direction=stroke.direction, fires=stroke.fires)
+                used = nozzles_used(stroke.words)
+                wet = self._recovering(lambda: self.care.before_stroke(used),
+                                       f"head care before stroke {stroke.index}")
+                rep.spits = self.care.spits - spits0
                 self.print_stroke(stroke, x0)
+                self.care.after_stroke(used, wet)
                 rep.strokes_printed += 1
                 self.telemetry.strokes_printed = rep.strokes_printed
                 self._checkpoint(next_stroke=stroke.index + 1)
@@ -508,12 +524,20 @@ class PrintJob:
             self._estop()
         if c.paused and not c.cancelled.is_set():
             self._state("paused", f"before stroke {next_index}")
-            c.wait_while_paused()
+            since = time.monotonic()
+            c.wait_while_paused(lambda: self._keep_wet(since))
             self._state("printing")
         if c.estop_requested.is_set():
             self._estop()
         if c.cancelled.is_set():
             raise JobCancelled(f"cancelled before stroke {next_index}")
+
+    def _keep_wet(self, since: float) -> None:
+        """While paused: head care (spit, cap); a failure here waits for the resume."""
+        try:
+            self.care.idle(since)
+        except (LinkError, DeviceError, PrinterFault) as exc:
+            log.warning("job %s: head care while paused: %s", self.job_id, exc)
 
     def _safe_stop(self) -> None:
         """After a failure: heads off, carriage stopped; errors here are secondary."""

@@ -249,6 +249,11 @@ class Printer:
             self.configure_heads(force=True)
         if not st.flags & P.FLAG_ENABLED:
             self.enable()
+        if st.flags & P.FLAG_CAPPED and not (st.flags & P.FLAG_HOMED and
+                                            st.flags & P.FLAG_PAPER_MEASURED):
+            say("uncapping")                 # the caps would be torn off (protocol 2.9)
+            self.call(P.Op.CAP, on=0)
+            self.wait_idle("uncapping")
         if not st.flags & P.FLAG_HOMED:
             say("homing")
             self.home()

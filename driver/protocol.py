@@ -21,7 +21,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-PROTOCOL_VERSION = (1, 0)
+PROTOCOL_VERSION = (1, 1)      # 1.1: head care, section 2.9
 
 # -- section 1: the data channel's USB function ----------------------------------------------
 USB_VID = 0x1209      # pid.codes, the open-hardware vendor id
@@ -71,6 +71,10 @@ class Op(enum.IntEnum):
     JOB_BEGIN = 0x14
     JOB_END = 0x15
     PING = 0x16
+    SPIT = 0x17             # head care (section 2.9), protocol 1.1
+    PURGE = 0x18
+    CAP = 0x19
+    SERVICE_STATUS = 0x1A
 
 
 def op_name(op: int) -> str:
@@ -144,6 +148,7 @@ class Motion(enum.IntEnum):
     PRINTING = 4    # a print line: ramp, fire span, ramp
     FEEDING = 5
     STOPPING = 6
+    SERVICING = 7   # SPIT, PURGE or CAP at the service station (section 2.9)
 
 
 # STATUS flags (GET_STATUS, section 2.5)
@@ -155,6 +160,7 @@ FLAG_LINE_DONE = 1 << 4
 FLAG_FEED_DONE = 1 << 5
 FLAG_JOB_OPEN = 1 << 6
 FLAG_FAULT = 1 << 7
+FLAG_CAPPED = 1 << 8     # the caps are up (section 2.9)
 
 # -- section 2.6: FPGA registers in the DSP's I/O space (A15 = 1, A5..A0) ----------------
 REG_STATUS = 0x8000       # read: D0 DIR, D1 DPI(600), D2 WE_EN, D3 DPI(300), D4 FIFO empty,
@@ -489,6 +495,10 @@ decl(Op.JOB_BEGIN, request="job:u32 x0:i32 width:u32 height:u32 dpi:u16 row_nm:u
      echo=True)
 decl(Op.JOB_END, request="job:u32", echo=True)
 decl(Op.PING, request="data:bytes", echo=True)
+decl(Op.SPIT, request="drops:u16 heads:u8", echo=True)
+decl(Op.PURGE, request="ms:u16 heads:u8", echo=True)
+decl(Op.CAP, request="on:u8", echo=True)
+decl(Op.SERVICE_STATUS, response="capped:u8 wet_clock_ms:u32 spit_age_ms:u32[8]")
 
 
 def encode_request(op: int, **values) -> bytes:

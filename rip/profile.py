@@ -640,12 +640,53 @@ class CurvesSection(_Section):
     K: tuple[tuple[float, float], ...] = _key(_Curve(), _IDENTITY, doc="as C")
 
 
+@dataclass(frozen=True, kw_only=True)
+class MaintenanceSection(_Section):
+    """Head care (docs/protocol.md 2.9, docs/driver.md "Head care").  The ink's drying
+    figures are what the emulator models; the schedule is what the host does."""
+    open_time_s: float = _key(_Num(gt=0), 120.0, doc="ink: an uncapped nozzle idle this "
+                              "long misfires (drying) until it has fired recovery_drops")
+    recovery_drops: int = _key(_Num(True, ge=1), 40, doc="ink: misfires of a dried nozzle "
+                               "before it drops again")
+    clog_time_s: float = _key(_Num(gt=0), 1800.0, doc="ink: idle this long, a nozzle "
+                              "clogs: only a purge opens it; > open_time_s")
+    spit: bool = _key(_Bool(), True, doc="spit (keep-wet firing into the spittoon) before "
+                      "strokes and while idle or paused; false: never (not for production)")
+    spit_interval_s: float = _key(_Num(gt=0), 30.0, doc="spit a head before a stroke in "
+                                  "which a nozzle idle this long would fire, and every this "
+                                  "long while paused; + the longest stroke < open_time_s")
+    spit_drops: int = _key(_Num(True, ge=1, le=10000), 200, doc="drops per nozzle per "
+                           "spit; >= recovery_drops")
+    spit_hz: float = _key(_Num(gt=0), 5000.0, doc="spit firing rate; <= [head] max_fire_hz")
+    cap_after_s: float = _key(_Num(ge=0), 120.0, doc="an idle or paused printer parks and "
+                              "caps after this long (0: never)")
+    purge_ms: int = _key(_Num(True, ge=100, le=10000), 1500, doc="`printer purge` pump time")
+    purge_ml: float = _key(_Num(ge=0), 0.8, doc="ink a purge costs per head and second "
+                           "of pumping (accounting)")
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        if self.clog_time_s <= self.open_time_s:
+            raise at.sub("clog_time_s").error(f"must be above open_time_s ({self.open_time_s})")
+        if self.spit_drops < self.recovery_drops:
+            raise at.sub("spit_drops").error(f"a spit of {self.spit_drops} drops does not "
+                                             f"recover a dried nozzle ({self.recovery_drops})")
+        if self.spit_hz > ctx.head.max_fire_hz:
+            raise at.sub("spit_hz").error(f"above the head's max_fire_hz ({ctx.head.max_fire_hz})")
+        c = ctx.carriage
+        stroke_s = (c.rail_counts / ctx.encoder.counts_per_inch * 25.4
+                    / min(c.speed_mm_s.values()) + 2 * min(c.speed_mm_s.values()) / c.accel_mm_s2)
+        if self.spit and self.spit_interval_s + stroke_s >= self.open_time_s:
+            raise at.sub("spit_interval_s").error(
+                f"{self.spit_interval_s} s + the longest stroke ({stroke_s:.1f} s) must stay "
+                f"below open_time_s ({self.open_time_s} s): a nozzle would dry mid-stroke")
+
+
 # the sections in file (and checking) order: later ones are checked against earlier ones
 SECTIONS: dict[str, type] = {
     "printer": PrinterSection, "encoder": EncoderSection, "head": HeadSection,
     "layout": LayoutSection, "carriage": CarriageSection, "feed": FeedSection,
     "fpga": FpgaSection, "link": LinkSection, "paper": PaperSection,
-    "color": ColorSection, "curves": CurvesSection,
+    "color": ColorSection, "curves": CurvesSection, "maintenance": MaintenanceSection,
 }
 
 
@@ -684,6 +725,7 @@ class Profile:
     paper: PaperSection
     color: ColorSection
     curves: CurvesSection
+    maintenance: MaintenanceSection
 
     # -- the names most of the code uses ------------------------------------------------------
     @property

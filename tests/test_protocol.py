@@ -125,7 +125,8 @@ def test_echoed_commands():
     """Section 2.3: these answers repeat the command's payload and the host checks it."""
     assert {op for op, c in P.COMMANDS.items() if c.echo} == {
         P.Op.SET_BAUD, P.Op.ENABLE, P.Op.SET_LINE, P.Op.FEED, P.Op.WRITE_REG,
-        P.Op.HEAD_CONFIG_LOAD, P.Op.JOB_BEGIN, P.Op.JOB_END, P.Op.PING}
+        P.Op.HEAD_CONFIG_LOAD, P.Op.JOB_BEGIN, P.Op.JOB_END, P.Op.PING,
+        P.Op.SPIT, P.Op.PURGE, P.Op.CAP}
 
 
 def test_layouts_decode_and_encode():
@@ -227,8 +228,8 @@ def _send_rest_of_config(ser, held: int) -> None:
 
 def test_emulator_answers_the_doc_examples_byte_for_byte():
     """The emulated DSP, fed the documented host bytes in order, sends the documented
-    answers."""
-    ser, _ = in_process(Printer())
+    answers (its idle time not counted, as in the doc: section 2.9)."""
+    ser, _ = in_process(Printer(faults=Faults(idle_time_scale=0)))
     lines = [ln for ln in FRAMES if ln[1] in ("host->dsp", "dsp->host")]
     held = 0
     for (name, direction, data), (reply, rdir, expected) in zip(lines[::2], lines[1::2]):
