@@ -408,6 +408,16 @@ def test_test_print_through_the_server_and_calibration_saves_the_printers_profil
     prof = load_profile(server.state / "profiles" / "main.toml")
     assert prof.bidir_offset_columns.get(dlg.dpi.currentData()) == 2
     dlg.close()
+    # head care from the card's menu: the server parks and caps, the card says so; uncap
+    card = win.printers_panel.cards["main"]
+    acts = {a.text(): a for a in card.care.menu().actions()}
+    assert set(acts) == {"Spit all heads", "Purge and wipe all heads", "Park and cap", "Uncap"}
+    acts["Spit all heads"].trigger()
+    acts["Park and cap"].trigger()
+    qtbot.waitUntil(lambda: "(heads capped)" in card.state.text(), timeout=LONG)
+    assert server.client.request("GET", "/v1/printers")["printers"][0]["capped"] is True
+    acts["Uncap"].trigger()
+    qtbot.waitUntil(lambda: "(heads capped)" not in card.state.text(), timeout=LONG)
 
 
 @pytest.mark.parametrize("size", [(1366, 768), (1920, 1080)])

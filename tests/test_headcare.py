@@ -221,3 +221,47 @@ def test_printer_commands_from_the_command_line():
     assert r.returncode == 2 and "--heads: no head 'Q9'" in r.stderr
     r = run("status", "--json")
     assert r.returncode == 0 and '"capped": false' in r.stdout and '"since_spit_s"' in r.stdout
+
+
+# -- the print server ----------------------------------------------------------------------------
+def test_the_server_does_head_care_between_jobs_and_caps_an_idle_printer(tmp_path, tint):
+    """POST /v1/printers/NAME/head-care spits, purges, caps; an idle printer caps itself
+    after cap_after_s (here 1 s) and the next job uncaps and prints bit-exact."""
+    import time
+
+    from wideprint.app.server import PrintServer, ServerConfig
+    from wideprint.app.server_cli import ApiError, Client
+    src, planes = tint
+    prof = profile_with(tmp_path, cap_after_s=1.0)
+    srv = PrintServer(ServerConfig(device="emulator", state_dir=tmp_path / "state",
+                                   media_dir=tmp_path / "media", port=0,
+                                   profile_path=prof.path))
+    srv.start()
+    client = Client(srv.state_dir)
+    try:
+        r = client.request("POST", "/v1/printers/main/head-care",
+                           body={"action": "spit", "heads": ["C1", "M2"], "drops": 250})
+        assert r["state"] == "done", r
+        r = client.request("POST", "/v1/printers/main/head-care", body={"action": "purge", "ms": 500})
+        assert r["state"] == "done", r
+        emu = srv.workers["main"].dev.emulator
+        # the heads asked for (the idle schedule then spits the others, never spat yet)
+        assert [e["heads"] for e in emu.events if e["event"] == "spit"][0] == [0, 3]
+        assert emu.service.purge_ml == pytest.approx(prof.maintenance.purge_ml * 0.5 * 8)
+        for bad, words in (({"action": "wash"}, "action must be one of"),
+                           ({"action": "spit", "heads": ["Z9"]}, "heads must be a list"),
+                           ({"action": "cap", "ms": 500}, "ms is for purge")):
+            with pytest.raises(ApiError, match=words):
+                client.request("POST", "/v1/printers/main/head-care", body=bad)
+        deadline = time.monotonic() + 15
+        while not client.request("GET", "/v1/printers")["printers"][0]["capped"]:
+            assert time.monotonic() < deadline, "the idle printer did not cap"
+            time.sleep(0.1)
+        job = client.submit(src, settings={"placement": {"size": "pixels"}})["job"]["id"]
+        assert client.wait(job, 120)["state"] == "done"
+        kinds = [e["event"] for e in emu.events]
+        assert kinds.index("cap") < kinds.index("uncap")
+        assert np.array_equal(read_planes(tmp_path / "media" / f"job-{job}.tif"), planes)
+    finally:
+        client.close()
+        srv.stop(timeout=5)

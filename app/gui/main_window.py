@@ -594,9 +594,11 @@ class MainWindow(QMainWindow):
     def printer_action(self, printer: str, what: str, body) -> None:
         if what == "test-prints":
             return self.open_calibration(printer)
+        detail = f" ({body.get('then') or body.get('action')})" if body else ""
         self.link.call(lambda c: c.printer_action(printer, what, body),
-                       lambda _r: log.info("printer %s: %s%s", printer, what,
-                                           f" ({body['then']})" if body else ""))
+                       lambda r: log.info("printer %s: %s%s%s", printer, what, detail,
+                                          f": {r['message']}" if isinstance(r, dict) and
+                                          r.get("message") else ""))
 
     def _update_actions(self) -> None:
         jobs = self.selected_jobs()

@@ -24,7 +24,7 @@ def _fixed_lines(label: QLabel, lines: int) -> QLabel:
 
 
 class PrinterCard(QFrame):
-    action = Signal(str, str, object)      # printer, what (pause, resume, clear-fault, test-prints), body
+    action = Signal(str, str, object)      # printer, what (pause, resume, clear-fault, test-prints, head-care), body
 
     def __init__(self, name: str, parent=None):
         super().__init__(parent)
@@ -86,9 +86,21 @@ class PrinterCard(QFrame):
         self.tests = QPushButton("Test prints…")
         self.tests.setObjectName("printer_tests")
         self.tests.clicked.connect(lambda: self.action.emit(self.name, "test-prints", None))
+        # head care between jobs (docs/server.md "Head care"): the server runs it
+        self.care = QToolButton()
+        self.care.setObjectName("printer_care")
+        self.care.setText("Head care")
+        self.care.setToolTip("spit, purge or cap the heads (between jobs)")
+        self.care.setPopupMode(QToolButton.InstantPopup)
+        m = QMenu(self.care)
+        for label, what in (("Spit all heads", "spit"), ("Purge and wipe all heads", "purge"),
+                            ("Park and cap", "cap"), ("Uncap", "uncap")):
+            m.addAction(label, lambda _w=what: self.action.emit(self.name, "head-care", {"action": _w}))
+        self.care.setMenu(m)
         row.addWidget(self.pause)
         row.addWidget(self.clear)
         row.addWidget(self.tests)
+        row.addWidget(self.care)
         row.addStretch(1)
         g.addLayout(row, 4, 0, 1, 3)
         g.setColumnStretch(1, 1)
@@ -124,6 +136,8 @@ class PrinterCard(QFrame):
             text = f"<b>Paused</b> — {p.get('reason') or 'by the operator'}"
         else:
             text = "<span style='color:#2e7d32'><b>Ready</b></span> — waiting for jobs"
+        if p.get("capped") and not cur and not fault:
+            text += " (heads capped)"
         self.state.setText(text)
         self.state.setToolTip(p.get("reason") or "")
         if cur:
@@ -172,6 +186,7 @@ class PrinterCard(QFrame):
         self.pause.setEnabled(not fault)
         self.clear.setEnabled(bool(fault))
         self.tests.setEnabled(not fault and not cur)
+        self.care.setEnabled(not fault and not cur)
 
 
 class PrintersPanel(QScrollArea):

@@ -504,6 +504,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                     return self._json(200, self.srv.clear_fault(name, body.get("then", "resume")))
                 if what == "test-print":
                     return self._json(200, self.srv.test_print(name, body))
+                if what == "head-care":
+                    return self._json(200, self.srv.service(name, body))
                 if what in ("pause", "resume"):
                     if body:
                         raise Invalid(f"{what} takes no parameters")

@@ -424,6 +424,39 @@ class PrintServer:
         except RuntimeError as exc:
             raise Invalid(str(exc), 409) from None
 
+    def service(self, name: str, body) -> dict:
+        """POST /v1/printers/NAME/head-care: spit, purge, cap or uncap between jobs
+        (docs/server.md, "Head care"); answers when done."""
+        w = self.printer_worker(name)
+        if not isinstance(body, dict) or set(body) - {"action", "heads", "drops", "ms"}:
+            raise Invalid('expected {"action": "spit"|"purge"|"cap"|"uncap", "heads": [NAME, ...], '
+                          '"drops": N, "ms": N}')
+        action = body.get("action")
+        if action not in ("spit", "purge", "cap", "uncap"):
+            raise Invalid("action must be one of spit, purge, cap, uncap")
+        heads = body.get("heads")
+        names = [h.name for h in w.profile.heads]
+        if heads is None:
+            mask = (1 << len(names)) - 1
+        elif not isinstance(heads, list) or not heads or \
+                any(not isinstance(h, str) or h not in names for h in heads):
+            raise Invalid(f"heads must be a list of head names ({', '.join(names)})")
+        else:
+            mask = sum(1 << names.index(h) for h in heads)
+        amount = None
+        if "drops" in body:
+            if action != "spit":
+                raise Invalid("drops is for spit")
+            amount = _check_int("drops", body["drops"], 1, 10000)
+        if "ms" in body:
+            if action != "purge":
+                raise Invalid("ms is for purge")
+            amount = _check_int("ms", body["ms"], 100, 10000)
+        try:
+            return dict(w.service(action, mask, amount), printer=name)
+        except RuntimeError as exc:
+            raise Invalid(str(exc), 409) from None
+
     def move(self, job_id: int, printer: str | None) -> dict:
         """A job not yet started goes to another printer (None or "any": the first free)."""
         if printer in (None, "", "any"):
@@ -487,7 +520,8 @@ class PrintServer:
                             media=None if live is None or live.job is None else
                             dict(job=live.job, version=live.version),
                             state=w.printer_state, error=w.printer_error, fault=w.fault or None,
-                            paused=w.paused, reason=w.pause_reason, current=cur))
+                            paused=w.paused, reason=w.pause_reason, capped=w.capped,
+                            current=cur))
         return out
 
     def hot_done(self, job: dict, state: str, message: str) -> None:

@@ -51,6 +51,10 @@ class Worker(threading.Thread):
         self._cancel: set[int] = set()
         self._backoff = server.config.reconnect_backoff[0]
         self._tests: list[dict] = []       # test prints asked for, run between jobs
+        self._service: list[dict] = []     # head care asked for (spit, purge, cap), idem
+        self.care = None                   # the printer's head-care schedule (HeadCare)
+        self.capped: bool | None = None    # as last seen (None: not known yet)
+        self._idle_since = time.monotonic()
         self.live = None                   # an emulated printer's media as it lands (LiveMedia)
         self.paper_mm: float | None = None # the paper's width as last measured
         self._test_ids = 0
@@ -159,7 +163,7 @@ class Worker(threading.Thread):
                                 state="printing", detail="", stroke_index=None,
                                 strokes_total=0, strokes_printed=0, resumed=False)
             self.printer_state = "printing"
-            pj = PrintJob(self._device(), rip, job_id=job_id)
+            pj = PrintJob(self._device(), rip, job_id=job_id, head_care=self._care())
             self.job = pj
             rep = pj.run()
             media = self.srv.config.media_dir
@@ -216,6 +220,10 @@ class Worker(threading.Thread):
                     log.exception("expiring spool copies")
             if self._tests and not self.fault:
                 self._run_test(self._tests.pop(0))
+                self._idle_since = time.monotonic()
+                continue
+            if self._service and not self.fault:
+                self._run_service(self._service.pop(0))
                 continue
             job = None
             if not self.paused:
@@ -224,6 +232,7 @@ class Worker(threading.Thread):
                 except Exception:  # noqa: BLE001 - a database hiccup must not end the worker
                     log.exception("reading the queue")
             if job is None:
+                self._keep_wet()
                 with self.wake:
                     self.wake.wait(0.5)
                 continue
@@ -237,8 +246,75 @@ class Worker(threading.Thread):
                     log.exception("failing job %s", job["id"])
             finally:
                 self.current, self.job = None, None
+                self._idle_since = time.monotonic()
                 if self.printer_state == "printing":
                     self.printer_state = "idle"
+
+    # -- head care (docs/server.md "Head care", docs/driver.md) ----------------------------------
+    def _care(self):
+        """The printer's head-care schedule, kept between jobs (it knows which nozzles
+        fired when); a new one after the device was reopened."""
+        from ...driver.headcare import HeadCare
+        from ...driver.printer import Printer
+        dev = self._device()
+        if self.care is None or self.care.printer.device is not dev:
+            printer = Printer(dev)
+            if dev.info is None:
+                printer.connect()
+            self.care = HeadCare(printer)
+        return self.care
+
+    def _keep_wet(self) -> None:
+        """Idle: spit every spit interval, park and cap after cap_after_s.  Only a printer
+        this server has opened (an unopened one is left as it is), never one with a fault."""
+        if self.dev is None or self.fault:
+            return
+        from ...driver.link import DeviceError, LinkError
+        from ...driver.printer import PrinterFault
+        try:
+            care = self._care()
+            care.idle(self._idle_since)
+            self.capped = bool(care.status().capped) if care.active else None
+        except (LinkError, DeviceError, PrinterFault, OSError) as exc:
+            log.warning("printer %s: head care while idle: %s", self.name_, exc)
+
+    def service(self, action: str, mask: int, amount: int | None, timeout: float = 120.0) -> dict:
+        """Spit, purge, cap or uncap between jobs (the printer's queue may be paused):
+        answers when done."""
+        if self.fault:
+            raise RuntimeError(f"printer {self.name_} has a fault ({self.fault}): clear it first")
+        if self.job is not None:
+            raise RuntimeError(f"printer {self.name_} is printing: head care runs between jobs "
+                               f"(a job spits for itself)")
+        req = dict(action=action, mask=mask, amount=amount, done=threading.Event(), result=None)
+        with self.wake:
+            self._service.append(req)
+            self.wake.notify_all()
+        if not req["done"].wait(timeout):
+            raise RuntimeError(f"printer {self.name_}: {action} did not end within {timeout:.0f} s")
+        return req["result"]
+
+    def _run_service(self, req: dict) -> None:
+        from ...driver.link import DeviceError, LinkError
+        from ...driver.printer import PrinterFault
+        result = dict(action=req["action"], state="failed", message="")
+        try:
+            care = self._care()
+            care.printer.ready()             # enabled and homed (uncapped first if need be)
+            if req["action"] == "spit":
+                care.spit(req["mask"], req["amount"])
+            elif req["action"] == "purge":
+                care.purge(req["mask"], req["amount"])
+            else:
+                care.cap(req["action"] == "cap")
+            self.capped = bool(care.status().capped)
+            result["state"] = "done"
+        except (LinkError, DeviceError, PrinterFault, OSError, ValueError) as exc:
+            result["message"] = str(exc)
+        finally:
+            self._idle_since = time.monotonic()
+            req["result"] = result
+            req["done"].set()
 
     def _next_job(self) -> dict | None:
         """The next job for this printer: its own, or one for any printer whose width its
@@ -424,7 +500,8 @@ class Worker(threading.Thread):
                     elif kind == "stroke":
                         cur["stroke_index"], cur["strokes_total"] = kw["index"], kw["total"]
 
-                pj = PrintJob(dev, rip, job_id=job_id, on_event=on_event, resume=cp)
+                pj = PrintJob(dev, rip, job_id=job_id, on_event=on_event, resume=cp,
+                              head_care=self._care())
                 self.job = pj
                 if job_id in self._cancel:
                     pj.control.cancel()
