@@ -43,8 +43,15 @@ def ink_limit_level(ink_limit: float) -> int:
 # numba kernels
 
 
+# Curves are tables of 1/16 levels (CURVE_ONE = 16 a level): the output level is rounded
+# with this ordered pattern over the pixel index, so a budgeted amount such as 26 x 0.25 =
+# 6.5 prints as 6.5 on average, not 6 (docs/color.md "Precision"); whole amounts are exact.
+CURVE_ONE = 16
+ROUND16 = np.array([0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15], np.int64)
+
+
 @njit(cache=True, nogil=True, inline="always")
-def _limit_curves(c, m, y, k, limit, curves, use_curves):
+def _limit_curves(c, m, y, k, limit, curves, use_curves, p):
     if limit >= 0:
         s = c + m + y + k
         if s > limit:
@@ -78,11 +85,11 @@ def _limit_curves(c, m, y, k, limit, curves, use_curves):
                 c = nc
                 m = nm
                 y = ny
-    if use_curves:
-        c = curves[0, c]
-        m = curves[1, m]
-        y = curves[2, y]
-        k = curves[3, k]
+    if use_curves:             # 1/16 levels, rounded by position (a phase per ink)
+        c = (np.int64(curves[0, c]) + ROUND16[p & 15]) >> 4
+        m = (np.int64(curves[1, m]) + ROUND16[(p + 5) & 15]) >> 4
+        y = (np.int64(curves[2, y]) + ROUND16[(p + 10) & 15]) >> 4
+        k = (np.int64(curves[3, k]) + ROUND16[(p + 15) & 15]) >> 4
     return c, m, y, k
 
 
@@ -186,7 +193,7 @@ def _post_rows(out, limit, curves, use_curves):
         y = np.int64(out[p, 2])
         k = np.int64(out[p, 3])
         if use_curves or (limit >= 0 and c + m + y + k > limit):
-            c, m, y, k = _limit_curves(c, m, y, k, limit, curves, use_curves)
+            c, m, y, k = _limit_curves(c, m, y, k, limit, curves, use_curves, p)
             out[p, 0] = c
             out[p, 1] = m
             out[p, 2] = y
@@ -215,7 +222,7 @@ def _sep1(src, table, limit, curves, use_curves, out):
     for p in range(n):
         v = src[p]
         c, m, y, k = _limit_curves(np.int64(table[v, 0]), np.int64(table[v, 1]), np.int64(table[v, 2]),
-                                   np.int64(table[v, 3]), limit, curves, use_curves)
+                                   np.int64(table[v, 3]), limit, curves, use_curves, p)
         out[p, 0] = c
         out[p, 1] = m
         out[p, 2] = y
@@ -229,7 +236,7 @@ def _cmyk_post(src, scale, limit, curves, use_curves, out):
     for p in range(n):
         c, m, y, k = _limit_curves(np.int64(scale[src[p, 0]]), np.int64(scale[src[p, 1]]),
                                    np.int64(scale[src[p, 2]]), np.int64(scale[src[p, 3]]), limit, curves,
-                                   use_curves)
+                                   use_curves, p)
         out[p, 0] = c
         out[p, 1] = m
         out[p, 2] = y
@@ -242,7 +249,7 @@ def apply_ink_limit(cmyk: np.ndarray, ink_limit: float) -> np.ndarray:
     a = np.ascontiguousarray(cmyk, dtype=np.uint8)
     flat = a.reshape(-1, 4)
     out = np.empty_like(flat)
-    _cmyk_post(flat, np.arange(256, dtype=np.uint8), ink_limit_level(ink_limit), np.zeros((4, 256), np.uint8),
+    _cmyk_post(flat, np.arange(256, dtype=np.uint8), ink_limit_level(ink_limit), np.zeros((4, 256), np.uint16),
                False, out)
     return out.reshape(a.shape)
 
@@ -327,7 +334,8 @@ class Separator:
     embedded_icc: the file's profile (used unless ``input_icc`` is given); input_icc / output_icc: ICC
     files; default profiles are libvips' built-in sRGB (input) and CMYK (output).
     intent: perceptual | relative | saturation | absolute.  ink_limit: total area coverage in percent.
-    curves: (4, 256) uint8 per-channel linearisation, applied last.
+    curves: (4, 256) per-channel linearisation, applied last: uint8 levels, or float levels
+    with fractions (rounded by pixel position, an ordered pattern of 16; docs/color.md).
     grey_mode: 'k' (default, ink = 255 - grey on the K channel only) or 'icc'.
     black_point_compensation: passed to lcms (off by default).
     """
@@ -364,14 +372,18 @@ class Separator:
             c = np.asarray(curves)
             if c.shape != (4, 256):
                 raise ValueError(f"curves must have shape (4, 256), not {c.shape}")
-            if c.dtype != np.uint8:
-                if not np.issubdtype(c.dtype, np.integer) or c.min() < 0 or c.max() > 255:
-                    raise ValueError("curves must be uint8 (integers 0..255)")
-                c = c.astype(np.uint8)
+            if np.issubdtype(c.dtype, np.floating):   # levels with fractions (profile_curves)
+                if not np.isfinite(c).all() or c.min() < 0 or c.max() > 255:
+                    raise ValueError("curves must be levels 0..255")
+                c = np.rint(c * CURVE_ONE).astype(np.uint16)
+            elif not np.issubdtype(c.dtype, np.integer) or c.min() < 0 or c.max() > 255:
+                raise ValueError("curves must be uint8 (integers 0..255) or levels 0..255")
+            else:
+                c = c.astype(np.uint16) * CURVE_ONE
             self._curves = np.ascontiguousarray(c)
             self._use_curves = True
         else:
-            self._curves = np.zeros((4, 256), np.uint8)
+            self._curves = np.zeros((4, 256), np.uint16)
             self._use_curves = False
         self.curves = self._curves if self._use_curves else None
 

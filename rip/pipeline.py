@@ -67,15 +67,15 @@ def prefetch(items: Iterator, depth: int = 2) -> Iterator:
 
 
 def profile_curves(profile: Profile, dpi: int | None = None) -> np.ndarray | None:
-    """(4, 256) uint8 LUT from the profile's [curves] and, for a dpi mode, its [color]
-    drop_budget (the curve's output times the budget, rounded: docs/color.md
-    "Linearisation"); None if identity."""
-    lut = np.empty((4, 256), np.uint8)
+    """(4, 256) float LUT from the profile's [curves] and, for a dpi mode, its [color]
+    drop_budget (the curve's output times the budget, not rounded: the separation rounds
+    it by position, docs/color.md "Linearisation"); None if identity."""
+    lut = np.empty((4, 256))
     x = np.arange(256)
     budget = 1.0 if dpi is None else profile.color.drop_budget.get(dpi, 1.0)
     for c, name in enumerate(COLORS):
         pts = np.asarray(getattr(profile.curves, name), dtype=np.float64)
-        lut[c] = np.clip(np.rint(budget * np.interp(x, pts[:, 0], pts[:, 1])), 0, 255)
+        lut[c] = np.clip(budget * np.interp(x, pts[:, 0], pts[:, 1]), 0, 255)
     return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
 
 

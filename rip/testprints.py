@@ -255,7 +255,7 @@ def _wedge_layout(profile: Profile, width: int, dpi: int) -> ScanLayout:
         for i, v in enumerate(WEDGE_STEPS):
             c0 = inner0 + i * pitch + pgap // 2
             c1 = c0 + pitch - pgap
-            amounts[r0:r1, c0:c1, ch] = v if lut is None else lut[ch, v]
+            amounts[r0:r1, c0:c1, ch] = v if lut is None else np.rint(lut[ch, v])
             marks.append(Mark("patch", COLORS[ch], ch, 0, v, r0, r1, c0, c1))
     planes = Halftoner(WEDGE_DITHER, width).process(amounts)
     bars = []

@@ -14,6 +14,7 @@ import tifffile
 
 from test_swath import variant_profile
 from wideprint.app.cli import main
+from wideprint.rip.color import Separator
 from wideprint.rip.pipeline import RipJob, RipSettings, profile_curves
 from wideprint.rip.place import Placement
 from wideprint.rip.profile import DEFAULT_PROFILE, load_profile
@@ -54,7 +55,7 @@ def ink_ml_per_m2(prof, src, dpi: int, dither: str) -> np.ndarray:
 def tints(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("lin")
     out = {}
-    for tone in (45, 64, 128, 150):        # light (18 %, 25 %) and mid (50 %, 59 %) tones
+    for tone in (13, 26, 45, 64, 128, 150):   # light (5, 10, 18, 25 %) and mid (50, 59 %)
         path = tmp / f"t{tone}.tif"
         tifffile.imwrite(path, np.full((64, 64, 4), tone, np.uint8), photometric="separated")
         out[tone] = path
@@ -131,8 +132,13 @@ def test_the_budget_scales_the_curves_lut(tints):
     on = _profile(tmp, LINEAR, "linear")
     assert profile_curves(on, 150) is None
     lut = profile_curves(on, 600)
-    assert lut[:, 255].tolist() == [64] * 4 and lut[:, 128].tolist() == [32] * 4
-    assert lut[:, 45].tolist() == [11] * 4           # 11.25, rounded: the 8-bit bound
+    assert lut[:, 255].tolist() == [63.75] * 4 and lut[:, 128].tolist() == [32] * 4
+    assert lut[:, 26].tolist() == [6.5] * 4          # not rounded: the separation rounds by
+    sep = Separator("cmyk", 8, curves=lut)           # position, 6.5 on average
+    out = sep.convert(np.full((16, 64, 4), 26, np.uint8))
+    assert set(np.unique(out)) == {6, 7} and out.mean() == 6.5
+    assert np.array_equal(Separator("cmyk", 8, curves=np.rint(lut).astype(np.uint8)).convert(
+        np.full((4, 16, 4), 26, np.uint8)), np.full((4, 16, 4), 6, np.uint8))   # whole: exact
 
 
 # -- per-channel curves from a measured step wedge ------------------------------------------------
