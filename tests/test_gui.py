@@ -481,3 +481,13 @@ def test_calibration_from_a_scan_in_the_dialog(qtbot, tmp_path):
     # a scan of something else is named, not measured
     dlg.measure_scan(str(tmp_path / "missing.tif"))
     assert not dlg.scan_accept.isEnabled() and dlg.scan_result.text()
+    # the step wedge: measured ink curves into the profile (docs/color.md "Linearisation")
+    wedge = tmp_path / "wedge-scan.tif"
+    assert main(["test-print", "wedge-scan", "--width-mm", "100", "--dpi", "300", "--scan-out",
+                 str(wedge), "--scan-dpi", "600", "--inject", "dot-diameter=140um"]) == 0
+    dlg.pattern.setCurrentIndex(dlg.pattern.findData("wedge-scan"))
+    dlg.width_mm.setValue(100)
+    dlg.measure_scan(str(wedge))
+    assert dlg.scan_accept.isEnabled() and dlg.measured.kind == "wedge", dlg.scan_result.text()
+    dlg.accept_scan()
+    assert dict(load_profile(prof).curves.C)[128] < 64     # dot gain: mid tones taken down

@@ -36,10 +36,11 @@ PATTERN_NAMES = {
     "bidir-scan": "Bidirectional, for a scan",
     "heads-scan": "Head positions, for a scan",
     "feed-scan": "Paper feed, for a scan",
+    "wedge-scan": "Step wedge (ink curves), for a scan",
 }
 # the scan patterns -> the `wideprint calibrate` measurement that reads them (app/calibrate.py)
 SCAN_KINDS = {"nozzle-check": "nozzles", "bidir-scan": "bidir", "heads-scan": "heads",
-              "feed-scan": "feed"}
+              "feed-scan": "feed", "wedge-scan": "wedge"}
 
 
 # -- reading the printed patterns (pure; the tests use them too) ---------------------------
@@ -370,7 +371,8 @@ class CalibrationDialog(QDialog):
         self.scan_accept.setEnabled(False)
         if kind is None:
             self.scan_result.setText("Choose a pattern made for a scan (nozzle check, "
-                                     "bidirectional / head positions / paper feed for a scan).")
+                                     "bidirectional / head positions / paper feed / step "
+                                     "wedge for a scan).")
             return
         try:
             res = calibrate(kind, path, self.profile, self.dpi.currentData(),
