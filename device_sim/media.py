@@ -86,13 +86,19 @@ class Media:
         n = row - self._base
         if n <= 0:
             return
-        n_win = min(n, self._win.shape[0])
+        win = self._win
+        n_win = min(n, win.shape[0])
         if self._writer:
-            self._writer.write(self._win[:n_win])
-            if n > n_win:
-                self._writer.write(np.zeros((n - n_win, self.width, 4), np.uint8))
-        self._win = np.roll(self._win, -n_win, axis=0)
-        self._win[-n_win:] = 0
+            self._writer.write(win[:n_win])       # taken at once (rip/planes.py)
+            blank = np.zeros((min(n - n_win, win.shape[0]), self.width, 4), np.uint8)
+            for r in range(n_win, n, blank.shape[0] or 1):      # rows past the window: empty
+                self._writer.write(blank[:min(blank.shape[0], n - r)])
+        # the rows left move up in place, a block of n_win rows at a time (blocks that do
+        # not overlap: no temporary copy of the window, which is the job's width x a swath)
+        for r in range(0, win.shape[0] - n_win, n_win):
+            m = min(n_win, win.shape[0] - n_win - r)
+            win[r:r + m] = win[r + n_win:r + n_win + m]
+        win[-n_win:] = 0
         self._base = row
 
     def close(self) -> None:

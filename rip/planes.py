@@ -205,27 +205,41 @@ class PlanesWriter:
         if self._rows + rows.shape[0] > self.height:
             raise ValueError("more rows than the declared height")
         self._rows += rows.shape[0]
+        if kind == "dots":
+            # 0/1 dots wait for their band as the packed encoding's rows, 1/8 of the bytes
+            # (np.packbits is ~10x faster than deflate), and the caller's array is free to
+            # be reused at once (the emulator's media window is)
+            if rows.size and int(rows.max()) > 1:
+                if self.packed:
+                    raise ValueError(f"the packed planes format holds 0 or 1 drop per dot, "
+                                     f"not {int(rows.max())}")
+                rows = ("dots", rows.copy())
+            else:
+                rows = ("nibbles", np.packbits(rows.reshape(rows.shape[0], -1), axis=1))
+        else:
+            rows = (kind, rows)
         self._pending.append(rows)
-        self._pending_rows += rows.shape[0]
+        self._pending_rows += rows[1].shape[0]
         seg = self.rows_per_segment
         while self._pending_rows >= seg or (self._rows == self.height and self._pending_rows):
             self._flush_band()
 
     def _flush_band(self) -> None:
-        allrows = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        kinds = {k for k, _ in self._pending}
+        if len(kinds) > 1:                   # a doubled dot among 0/1 rows: all as dots
+            w = self.width
+            parts = [a if k == "dots" else
+                     np.unpackbits(a, axis=1, count=w * 4).reshape(a.shape[0], w, 4)
+                     for k, a in self._pending]
+            kind = "dots"
+        else:
+            parts, kind = [a for _, a in self._pending], kinds.pop()
+        allrows = np.concatenate(parts) if len(parts) > 1 else parts[0]
         n = min(self.rows_per_segment, allrows.shape[0])
-        band, kind = np.ascontiguousarray(allrows[:n]), self._kind
+        band = np.ascontiguousarray(allrows[:n])
         rest = allrows[n:]
-        self._pending = [rest] if rest.shape[0] else []
+        self._pending = [(kind, rest)] if rest.shape[0] else []
         self._pending_rows = rest.shape[0]
-        if kind == "dots":
-            # 0/1 dots travel to the workers as the packed encoding's rows, 1/8 of the bytes
-            # (np.packbits is ~10x faster than deflate): the queue holds a few of them
-            top = int(band.max()) if band.size else 0
-            if top <= 1:
-                band, kind = np.packbits(band.reshape(n, -1), axis=1), "nibbles"
-            elif self.packed:
-                raise ValueError(f"the packed planes format holds 0 or 1 drop per dot, not {top}")
         future = self._pool.submit(self._encode, kind, band)
         while True:                 # never block forever on a writer that has failed
             if self._error:
