@@ -46,9 +46,11 @@ def cups_missing() -> str | None:
 class Cupsd:
     """A cupsd of its own: `Listen 127.0.0.1:PORT`, its config, spool, cache and logs in
     `d`, ServerBin `d/bin` = the system's helpers plus the `backends` given (name -> file,
-    and CUPS' `ipp`, installed 0700 root: cupsd runs such a backend as root)."""
+    and CUPS' `ipp`, installed 0700 root: cupsd runs such a backend as root); `conf`: files
+    copied into its ServerRoot (e.g. a .convs file)."""
 
-    def __init__(self, d: Path, backends: dict[str, Path] | None = None):
+    def __init__(self, d: Path, backends: dict[str, Path] | None = None,
+                 conf: tuple[Path, ...] = ()):
         self.dir = Path(d)
         os.chmod(self.dir, 0o755)
         self.port = free_port()
@@ -68,6 +70,8 @@ class Cupsd:
         for name, src in {**({"ipp": ipp} if ipp.exists() else {}), **(backends or {})}.items():
             shutil.copy(src, d / "bin" / "backend" / name)
             os.chmod(d / "bin" / "backend" / name, 0o700)
+        for f in conf:
+            shutil.copy(f, d / "conf" / Path(f).name)
         (d / "conf" / "cups-files.conf").write_text(f"""\
 ServerRoot {d}/conf
 RequestRoot {d}/spool
@@ -144,14 +148,15 @@ PreserveJobFiles No
             self.proc.wait()
 
 
-def private_cupsd(tmp_path_factory, backends: dict[str, Path] | None = None):
+def private_cupsd(tmp_path_factory, backends: dict[str, Path] | None = None,
+                  conf: tuple[Path, ...] = ()):
     """The body of a cupsd fixture: yields a running Cupsd, stops it after."""
     why = cups_missing()
     if why:
         pytest.fail(why)                    # a missing dependency fails loudly, never a skip
     if os.geteuid() != 0:
         pytest.skip("the private cupsd runs its backends as root; run as root")
-    cups = Cupsd(tmp_path_factory.mktemp("cups"), backends)
+    cups = Cupsd(tmp_path_factory.mktemp("cups"), backends, conf)
     yield cups
     cups.stop()
 
