@@ -67,7 +67,8 @@ class Cupsd:
         # copied 0700 root, so cupsd runs them as root: as `lp` it could not reach them
         # through the test's 0700 tmp dir
         ipp = CUPS_LIB / "backend" / "ipp"
-        for name, src in {**({"ipp": ipp} if ipp.exists() else {}), **(backends or {})}.items():
+        system = {n: ipp for n in ("ipp", "ipps")} if ipp.exists() else {}
+        for name, src in {**system, **(backends or {})}.items():
             shutil.copy(src, d / "bin" / "backend" / name)
             os.chmod(d / "bin" / "backend" / name, 0o700)
         for f in conf:
