@@ -5,13 +5,10 @@ IPP/1.1 and IPP/2.0 suites) and prints JPEG, TIFF and PWG raster documents, whic
 the wideprint queue with their original file and print bit-exact on the emulator against
 the RIP's planes of the same file with the same settings."""
 
-import hashlib
 import os
 import plistlib
 import re
 import shutil
-import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -22,12 +19,11 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import ROOT, random_planes, write_cmyk_tiff
+from conftest import random_planes, write_cmyk_tiff
+from private_cups import IppServe, assert_bit_exact, free_port, wait_job
 from wideprint.app.api import rip
 from wideprint.app.ipp.bridge import find_binary
-from wideprint.app.server_cli import Client
 from wideprint.rip.planes import read_planes
-from wideprint.rip.profile import load_profile
 
 BINARY = find_binary()
 IPPTOOL_DIR = Path("/usr/share/cups/ipptool")
@@ -41,59 +37,12 @@ def _built():
                     "app/ipp/wideprint-ipp from libpappl-dev (resources/debian-packages.txt)")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def ipp(tmp_path_factory):
     """`wideprint serve --ipp` with printers left and right (emulated), on the loopback."""
-    if not shutil.which("ipptool"):
-        pytest.fail("ipptool is missing: apt-get install cups-ipp-utils (.ci/run does)")
-    root = tmp_path_factory.mktemp("ipp")
-    state, media = root / "state", root / "media"
-    port = _free_port()
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    log = open(root / "serve.log", "w")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "wideprint.app.cli", "serve", "--state-dir", str(state),
-         "--media-dir", str(media), "--port", "0", "--printer", "left=emulator",
-         "--printer", "right=emulator", "--ipp", "--ipp-port", str(port)],
-        stdout=log, stderr=subprocess.STDOUT, env=env)
-    deadline = time.monotonic() + 90
-    info = {}
-    while time.monotonic() < deadline and proc.poll() is None:
-        try:
-            import json
-            info = json.loads((state / "server.json").read_text())
-            if "ipp" in info:
-                break
-        except (OSError, ValueError):
-            pass
-        time.sleep(0.2)
-    if "ipp" not in info:
-        proc.kill()
-        proc.wait()
-        pytest.fail(f"serve --ipp did not start: {(root / 'serve.log').read_text()}")
-    client = Client(state)
-    token = (state / "token").read_text().strip()
-    ns = type("Ipp", (), {})()
-    ns.root, ns.state, ns.media, ns.port, ns.proc = root, state, media, port, proc
-    ns.uris, ns.client, ns.token = info["ipp"], client, token
-    ns.auth_uri = {name: uri.replace("ipp://", f"ipp://wp:{token}@")
-                   for name, uri in info["ipp"].items()}
-    ns.profile = {n: load_profile(state / "profiles" / f"{n}.toml") for n in ("left", "right")}
-    yield ns
-    client.close()
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    log.close()
+    serve = IppServe(tmp_path_factory.mktemp("ipp"), ["left", "right"])
+    yield serve
+    serve.stop()
 
 
 def ipptool(uri: str, test: str | Path, *args: str, cwd=None, timeout=120) -> dict:
@@ -141,18 +90,6 @@ def print_job(tmp: Path, uri: str, path: Path, fmt: str, name: str, job_attrs: s
     return attrs(t)
 
 
-def wait_job(client: Client, name: str, timeout: float = 120) -> dict:
-    """The wideprint job of that name, once it has ended."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        jobs = [j for j in client.jobs("done,failed,cancelled,queued,held,printing")
-                if j["name"] == name]
-        if jobs and jobs[-1]["state"] in ("done", "failed", "cancelled"):
-            return jobs[-1]
-        time.sleep(0.2)
-    raise AssertionError(f"no finished job {name}")
-
-
 def ipp_job_state(uri: str, job_id: int, tmp: Path) -> dict:
     test = tmp / "gja.test"
     test.write_text("""{
@@ -180,21 +117,6 @@ def wait_ipp_job(uri: str, job_id: int, tmp: Path, timeout: float = 120) -> dict
     raise AssertionError(f"IPP job {job_id} did not end")
 
 
-def sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def assert_bit_exact(ns, job: dict, original: Path, printer: str) -> None:
-    assert job["state"] == "done", job
-    assert job["printed_on"] == printer
-    assert job["sha256"] == sha256(original)           # the original file, not a copy of it
-    media = read_planes(ns.media / f"job-{job['id']}.tif")
-    planes = rip(original, job["settings"], profile=ns.profile[printer])
-    assert media.shape == planes.shape and media.any()
-    assert np.array_equal(media, planes)
-
-
-# -- the printers and their attributes -----------------------------------------------------------
 def test_serve_ipp_publishes_each_printers_uri(ipp):
     assert ipp.uris == {n: f"ipp://localhost:{ipp.port}/ipp/print/{n}" for n in ("left", "right")}
     assert (ipp.state / "ipp" / "wideprint-ipp.conf").stat().st_mode & 0o077 == 0   # the token
@@ -498,6 +420,6 @@ def test_the_printer_application_is_not_built_or_pappl_missing_is_loud(tmp_path)
                WIDEPRINT_IPP_BINARY=str(tmp_path / "absent"))
     r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "serve", "--state-dir",
                         str(tmp_path / "st"), "--port", "0", "--ipp", "--ipp-port",
-                        str(_free_port())], capture_output=True, text=True, env=env, timeout=60)
+                        str(free_port())], capture_output=True, text=True, env=env, timeout=60)
     assert r.returncode == 1
     assert "not built" in r.stderr and "libpappl-dev" in r.stderr
