@@ -14,6 +14,8 @@ its first fire is a starvation (docs/protocol.md 2.7):
 
 from __future__ import annotations
 
+from bisect import bisect_right
+
 import numpy as np
 
 from ..driver import protocol as P
@@ -53,6 +55,9 @@ class LineRun:
         """Fires i0.. happen on this move."""
         self.move, self.t_seg = move, t_start
         self.t_fire[i0:] = t_start + move.time_at(self.columns[i0:] * self.k)
+        # the same times as a list, for the per-block search (bisect holds the GIL: a numpy
+        # search of the whole line lets other threads take it for milliseconds)
+        self._t_list = self.t_fire.tolist()
 
     # -- faults known when the line starts ----------------------------------------------------
     def _stop_at(self, index: int, fault: P.Fault, head: int = 0xFF) -> None:
@@ -117,7 +122,7 @@ class LineRun:
                 if not self._starve(first, P.Fault.FIFO_UNDERRUN):
                     return True
                 continue
-            consumed = min(int(np.searchsorted(self.t_fire, load_t, side="right")), first)
+            consumed = bisect_right(self._t_list, load_t, 0, first)
             level = first - consumed
             self.min_level = level if self.min_level is None else min(self.min_level, level)
             fpga.fired = consumed            # the line has run up to this block's DMA

@@ -210,6 +210,9 @@ class PlanesWriter:
         seg = self.rows_per_segment
         while self._pending_rows >= seg or (self._rows == self.height and self._pending_rows):
             self._flush_band()
+        # what stays pending is copied: the caller may reuse its array once write() returns
+        # (the emulator's media window shifts in place)
+        self._pending = [p if p.base is None else p.copy() for p in self._pending]
 
     def _flush_band(self) -> None:
         allrows = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
@@ -226,6 +229,8 @@ class PlanesWriter:
                 band, kind = np.packbits(band.reshape(n, -1), axis=1), "nibbles"
             elif self.packed:
                 raise ValueError(f"the packed planes format holds 0 or 1 drop per dot, not {top}")
+            elif band.base is not None:
+                band = band.copy()          # the worker reads it after write() returned
         future = self._pool.submit(self._encode, kind, band)
         while True:                 # never block forever on a writer that has failed
             if self._error:
