@@ -22,11 +22,12 @@ from typing import Any, Iterable
 
 import numpy as np
 
-API_VERSION = "1.0"
+API_VERSION = "1.1"      # 1.1: scans (predict_scan, compare_scan, scan_dpi / scan_out)
 COLORS = "CMYK"
 
 __all__ = ["API_VERSION", "Comparison", "EmulatedPrinter", "PrintResult", "compare",
-           "diff_image", "load_profile", "print_file", "read_planes", "rip", "rip_settings"]
+           "compare_scan", "diff_image", "load_profile", "predict_scan", "print_file",
+           "read_planes", "rip", "rip_settings"]
 
 
 # -- settings and profiles -----------------------------------------------------------------
@@ -93,6 +94,7 @@ class PrintResult:
     settings: Any = None                # the RipSettings it was printed with
     profile: Any = None
     planes: np.ndarray | None = None    # test prints: the pattern's planes
+    scan_path: Path | None = None       # the emulator's scan of the job (scan_out=)
 
     @property
     def ok(self) -> bool:
@@ -119,7 +121,7 @@ class EmulatedPrinter:
 
     def __init__(self, profile=None, *, faults: Iterable[str] | None = None,
                  device: str = "emulator", machine_profile=None,
-                 workdir: str | Path | None = None):
+                 workdir: str | Path | None = None, scan_dpi: float | None = None):
         from ..device_sim.faults import Faults
         from .devices import is_emulator_spec, open_device
         self.profile = profile if profile is not None else load_profile()
@@ -137,17 +139,24 @@ class EmulatedPrinter:
         self.workdir = Path(workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
         self._media: dict[int, Path] = {}
+        self._scans: dict[int, Path] = {}
         self.jobs = 0
+        scan = {}
+        if scan_dpi is not None:            # the emulator scans each job (docs/physical.md)
+            if not self.emulated:
+                raise ValueError("only the emulator scans its prints")
+            scan = dict(scan_path=lambda job: str(self._scans[job]) if job in self._scans else None,
+                        scan_dpi=scan_dpi)
         self.device = open_device(device, self.profile, self.faults if self.emulated else None,
                                   media_path=lambda job: str(self._media[job]) if job in self._media else None,
-                                  machine_profile=machine_profile)
+                                  machine_profile=machine_profile, **scan)
 
     @property
     def emulator(self):
         return self.device.emulator
 
     def print(self, file: str | Path, settings: Any = None, *, media_out: str | Path | None = None,
-              **kw) -> PrintResult:
+              scan_out: str | Path | None = None, **kw) -> PrintResult:
         """Rip and print one file; never raises for a job that fails (the result says why),
         only for settings that are refused (ValueError)."""
         from ..rip.load import ImageError
@@ -160,7 +169,7 @@ class EmulatedPrinter:
             self.jobs += 1
             result.message = str(exc)
             return result
-        return self._run(job, result, media_out)
+        return self._run(job, result, media_out, scan_out)
 
     def print_pattern(self, pattern: str, *, width_mm: float = 100.0, dpi: int = 150,
                       head: str = "K1", nozzle: int = 64,
@@ -174,7 +183,7 @@ class EmulatedPrinter:
                              profile=self.profile, planes=job.planes)
         return self._run(job, result, media_out)
 
-    def _run(self, rip_job, result: PrintResult, media_out) -> PrintResult:
+    def _run(self, rip_job, result: PrintResult, media_out, scan_out=None) -> PrintResult:
         from ..driver.job import JobCancelled, JobError, PrintJob
         from ..rip.load import ImageError
         self.jobs += 1
@@ -182,6 +191,8 @@ class EmulatedPrinter:
         media = Path(media_out) if media_out else self.workdir / f"media-{job_id}.tif"
         if self.emulated:
             self._media[job_id] = media
+            if scan_out is not None:
+                self._scans[job_id] = Path(scan_out)
         events0 = len(self.emulator.events) if self.emulated else 0
         pj = PrintJob(self.device, rip_job, job_id=job_id)
         try:
@@ -198,11 +209,15 @@ class EmulatedPrinter:
         if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
             result.report["layout"] = rip_job.layout.report
         if self.emulated:
+            from .devices import emulated_seconds
+            result.report["printer_s"] = emulated_seconds(self.emulator, job_id)
             if result.state != "done":
                 self.emulator.abandon_job()      # complete its media file for inspection
             result.events = list(self.emulator.events)[events0:]
             if media.exists():
                 result.media_path, result.media = media, read_planes(media)
+            if job_id in self._scans and self._scans[job_id].exists():
+                result.scan_path = self._scans[job_id]
         return result
 
     def close(self) -> None:
@@ -230,6 +245,27 @@ def print_file(file: str | Path, settings: Any = None, *, device: str = "emulato
         if result.media_path is not None and media_out is None:
             result.media_path = None                    # it was in the temporary folder
         return result
+
+
+def predict_scan(file: str | Path, out: str | Path, settings: Any = None, *, scan_dpi: float = 600,
+                 profile=None, **kw) -> Path:
+    """The physical model's prediction of a scan of this job (docs/acceptance.md): the job
+    printed on a perfect emulated machine and scanned at `scan_dpi` without sensor noise,
+    written to `out` (an RGB TIFF with its resolution)."""
+    with tempfile.TemporaryDirectory(prefix="wideprint-predict-") as d:
+        with EmulatedPrinter(profile, faults=["scan-noise=0"], workdir=d, scan_dpi=scan_dpi) as printer:
+            result = printer.print(file, settings, scan_out=out, **kw)
+    if not result.ok:
+        raise ValueError(f"{file}: the prediction's print failed: {result.message}")
+    return Path(out)
+
+
+def compare_scan(scan: str | Path, predicted: str | Path, tolerances=None):
+    """A scan of a print against the predicted scan (predict_scan): registered, then ink
+    density, rows and dot positions within `tolerances` (a ScanTolerances; the defaults are
+    docs/acceptance.md's).  Returns a ScanComparison: `ok`, `problems`, `explain()`."""
+    from .scancheck import compare_scan as _compare
+    return _compare(scan, predicted, tolerances)
 
 
 # -- comparing ------------------------------------------------------------------------------

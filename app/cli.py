@@ -238,7 +238,7 @@ def cmd_print(args) -> int:
     import os
     import tempfile
     from ..device_sim.faults import Faults
-    from .devices import is_emulator_spec, open_device
+    from .devices import emulated_seconds, is_emulator_spec, open_device
     from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
     from ..driver.printer import Printer
@@ -389,6 +389,7 @@ def cmd_print(args) -> int:
                 if dev.emulator is not None:
                     stats = dev.emulator.jobs_done.get(job_id, {})
                     rep["stray_drops"] = stats.get("stray")
+                    rep["printer_s"] = emulated_seconds(dev.emulator, job_id)
                 print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
