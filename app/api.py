@@ -184,8 +184,6 @@ class EmulatedPrinter:
         return self._run(job, result, media_out)
 
     def _run(self, rip_job, result: PrintResult, media_out, scan_out=None) -> PrintResult:
-        from ..driver.job import JobCancelled, JobError, PrintJob
-        from ..rip.load import ImageError
         self.jobs += 1
         job_id = self.jobs
         media = Path(media_out) if media_out else self.workdir / f"media-{job_id}.tif"
@@ -194,23 +192,9 @@ class EmulatedPrinter:
             if scan_out is not None:
                 self._scans[job_id] = Path(scan_out)
         events0 = len(self.emulator.events) if self.emulated else 0
-        pj = PrintJob(self.device, rip_job, job_id=job_id)
-        try:
-            pj.run()
-            result.state = "done"
-        except JobCancelled as exc:
-            result.state, result.message = "cancelled", str(exc)
-        except (JobError, ImageError) as exc:
-            result.message = str(exc)
-        finally:
-            rip_job.close()
-        result.report = dict(pj.report.as_dict(), state=result.state,
-                             message=result.message or pj.report.message)
-        if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
-            result.report["layout"] = rip_job.layout.report
+        run = run_job(self.device, rip_job, job_id)
+        result.state, result.message, result.report = run.state, run.message, run.report
         if self.emulated:
-            from .devices import emulated_seconds
-            result.report["printer_s"] = emulated_seconds(self.emulator, job_id)
             if result.state != "done":
                 self.emulator.abandon_job()      # complete its media file for inspection
             result.events = list(self.emulator.events)[events0:]
@@ -231,6 +215,54 @@ class EmulatedPrinter:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@dataclass
+class JobRun:
+    """What run_job did: the driver's PrintJob, how it ended and its report."""
+    job: Any
+    state: str                          # done | failed | cancelled
+    message: str
+    report: dict
+
+
+def run_job(device, rip_job, job_id: int, *, on_event=None, on_job=None,
+            internal_errors: bool = False) -> JobRun:
+    """The job engine of `EmulatedPrinter.print` and `wideprint print` alike: one ripped job
+    printed on an open device, the RIP job closed after it.  A job that fails or is
+    cancelled does not raise: the JobRun says why (`internal_errors`: any other exception,
+    a bug, too, as "internal error: ..." - a batch goes on; otherwise it propagates).
+    `on_job(print_job)` is called before the job starts (a Ctrl-C handler cancels through
+    it).  The report holds the `print --report` keys, the layout's when there is one, and
+    on the emulator `printer_s`, the job's time on the printer's own clock."""
+    from ..driver.job import JobCancelled, JobError, PrintJob
+    from ..rip.load import ImageError
+    pj = PrintJob(device, rip_job, job_id=job_id, on_event=on_event)
+    if on_job is not None:
+        on_job(pj)
+    state, message = "failed", ""
+    try:
+        pj.run()
+        state = "done"
+    except JobCancelled as exc:
+        state, message = "cancelled", str(exc)
+    except (JobError, ImageError, ValueError, OSError) as exc:
+        # ValueError / OSError: the RIP refused this file midway (e.g. an ICC profile for
+        # another colour space)
+        message = str(exc)
+    except Exception as exc:
+        if not internal_errors:
+            raise
+        message = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        rip_job.close()
+    report = dict(pj.report.as_dict(), state=state, message=message or pj.report.message)
+    if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
+        report["layout"] = rip_job.layout.report
+    if device.emulator is not None:
+        from .devices import emulated_seconds
+        report["printer_s"] = emulated_seconds(device.emulator, job_id)
+    return JobRun(pj, state, message, report)
 
 
 def print_file(file: str | Path, settings: Any = None, *, device: str = "emulator",

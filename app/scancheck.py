@@ -17,7 +17,6 @@ compared where the print is, in three ways, each with a stated tolerance:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 

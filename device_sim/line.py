@@ -24,6 +24,9 @@ from .motion import ramp_counts
 from .servo import ServoMove
 
 
+_EDGE_NOZZLES = np.array([0x0001, 0x8000], np.uint16)     # nozzles 0 and 127: data there is HEAD_DATA
+
+
 class LineRun:
     def __init__(self, printer, move: ServoMove, t_start: float, speed: float, accel: float):
         fpga = printer.fpga
@@ -197,9 +200,10 @@ class LineRun:
         if count <= 0:
             return
         words = block.words[:, :count]
-        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3)
-        bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
-        if bad.any():
+        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3): both
+        # looked at in one operation (words 0 and 7 of every fire), the culprit only if set
+        if (words[:, :, ::7] & _EDGE_NOZZLES).any():
+            bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
             part, fire = np.argwhere(bad)[np.argmin(np.argwhere(bad)[:, 1])]
             mask_heads = [h for h in range(self.printer.n_heads) if block.head_mask >> h & 1]
             self._stop_at(first + int(fire), P.Fault.HEAD_DATA, mask_heads[int(part)])
