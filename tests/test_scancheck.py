@@ -5,6 +5,10 @@ with a dead nozzle or a bidirectional error must not, and must say why."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 import tifffile
@@ -40,6 +44,7 @@ def scan_of(chart, name, faults):
     with api.EmulatedPrinter(faults=faults, scan_dpi=600) as printer:
         result = printer.print(path, scan_out=d / f"{name}.tif", **SETTINGS)
     assert result.ok and result.scan_path == d / f"{name}.tif"
+    assert 1 < result.report["printer_s"] < 60        # the job on the printer's own clock
     return result
 
 
@@ -80,3 +85,34 @@ def test_a_scan_of_another_job_is_refused_at_registration(chart, tmp_path):
     tifffile.imwrite(path, other, photometric="rgb", resolution=(600, 600), resolutionunit="INCH")
     cmp = api.compare_scan(path, chart[1])
     assert not cmp.ok and "registration" in cmp.explain()
+
+
+OUTSIDE_TEST = '''
+import os
+from wideprint.app.pytest_plugin import assert_scan_matches
+
+def test_chart_on_the_printer(print_job):
+    result = print_job(os.environ["CHART"], passes=1, bidir=True, dpi=150)
+    assert result.ok
+    assert_scan_matches(result)
+'''
+
+
+def test_the_plugin_compares_the_scan_given_on_the_command_line(chart, tmp_path):
+    """`pytest --wideprint-scan SCAN.tif` from a project outside the repository: the
+    emulator's own scan passes; the scan of a print with a dead nozzle fails, saying why."""
+    (tmp_path / "test_outside.py").write_text(textwrap.dedent(OUTSIDE_TEST))
+    good = scan_of(chart, "outside-good", GLASS).scan_path
+    dead = scan_of(chart, "outside-dead", ["dead-nozzle=C2:40", *GLASS]).scan_path
+    env = dict(__import__("os").environ, CHART=str(chart[0]))
+    runs = {}
+    for name, scan in (("good", good), ("dead", dead)):
+        runs[name] = subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tmp_path),
+             f"--wideprint-scan={scan}", f"--wideprint-artifacts={tmp_path / name}"],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert runs["good"].returncode == 0, runs["good"].stdout[-3000:]
+    out = runs["dead"].stdout
+    assert runs["dead"].returncode == 1, out[-3000:]
+    assert "does not match the prediction" in out and "a nozzle that does not fire" in out, out[-3000:]
+    assert list((tmp_path / "dead").rglob("*-predicted-scan.tif"))     # kept for a look
