@@ -280,12 +280,13 @@ def print_file(file: str | Path, settings: Any = None, *, device: str = "emulato
 
 
 def predict_scan(file: str | Path, out: str | Path, settings: Any = None, *, scan_dpi: float = 600,
-                 profile=None, **kw) -> Path:
+                 grey: bool = False, profile=None, **kw) -> Path:
     """The physical model's prediction of a scan of this job (docs/acceptance.md): the job
     printed on a perfect emulated machine and scanned at `scan_dpi` without sensor noise,
-    written to `out` (an RGB TIFF with its resolution)."""
+    written to `out` (an RGB TIFF, or grey, with its resolution)."""
+    faults = ["scan-noise=0"] + (["scan-mode=grey"] if grey else [])
     with tempfile.TemporaryDirectory(prefix="wideprint-predict-") as d:
-        with EmulatedPrinter(profile, faults=["scan-noise=0"], workdir=d, scan_dpi=scan_dpi) as printer:
+        with EmulatedPrinter(profile, faults=faults, workdir=d, scan_dpi=scan_dpi) as printer:
             result = printer.print(file, settings, scan_out=out, **kw)
     if not result.ok:
         raise ValueError(f"{file}: the prediction's print failed: {result.message}")

@@ -219,13 +219,13 @@ __all__ = ["assert_fault", "assert_ink_within", "assert_media_equals_planes",
            "assert_no_underrun", "assert_nothing_printed_after_fault"]
 
 
-def assert_scan_matches(result: api.PrintResult, scan=None, *, scan_dpi: float = 600,
-                        tolerances=None):
+def assert_scan_matches(result: api.PrintResult, scan=None, *, tolerances=None):
     """A scan of the printed job (default: --wideprint-scan) against the physical model's
-    prediction of it (api.predict_scan, api.compare_scan, docs/acceptance.md): registered,
-    then ink density, rows and dot positions within the tolerances.  Without a scan the
-    assertion checks nothing (a real printer whose print was not scanned): the media and
-    device assertions stand."""
+    prediction of it (api.predict_scan at the scan's resolution and mode, api.compare_scan,
+    docs/acceptance.md): registered, then ink density, rows and dot positions within the
+    tolerances.  Without a scan the assertion checks nothing (a real printer whose print
+    was not scanned): the media and device assertions stand."""
+    from .scancheck import scan_format
     request = _RUNNING[-1] if _RUNNING else None
     if scan is None and request is not None:
         scan = request.config.getoption("--wideprint-scan")
@@ -233,7 +233,9 @@ def assert_scan_matches(result: api.PrintResult, scan=None, *, scan_dpi: float =
         return None
     out = (_artifacts() or Path(result.file).parent) / f"{Path(result.file).stem}-predicted-scan.tif"
     out.parent.mkdir(parents=True, exist_ok=True)
-    api.predict_scan(result.file, out, result.settings, scan_dpi=scan_dpi, profile=result.profile)
+    dpi, grey = scan_format(scan)
+    api.predict_scan(result.file, out, result.settings, scan_dpi=dpi, grey=grey,
+                     profile=result.profile)
     cmp = api.compare_scan(scan, out, tolerances)
     if not cmp.ok:
         raise AssertionError(f"{Path(scan).name} against the prediction of {result.file} "

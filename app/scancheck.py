@@ -45,7 +45,7 @@ class ScanComparison:
     scale: float = 1.0
     offset_mm: tuple = (0.0, 0.0)
     correlation: float = 0.0
-    density_worst: list = field(default_factory=lambda: [0.0] * 3)   # per band R, G, B
+    density_worst: list = field(default_factory=lambda: [0.0] * 3)   # per band R, G, B (or grey)
     density_where_mm: list = field(default_factory=lambda: [(0.0, 0.0)] * 3)
     row_worst: float = 0.0
     row_where_mm: float = 0.0
@@ -61,21 +61,34 @@ class ScanComparison:
                 f"{self.offset_mm[0]:.2f}, {self.offset_mm[1]:.2f} mm, correlation {self.correlation:.3f})")
         lines = [head]
         lines += [f"  {p}" for p in self.problems]
+        bands = BANDS if len(self.density_worst) == 3 else ["grey"]
         lines.append("  worst: density " + ", ".join(
-            f"{b} {d:+.3f}" for b, d in zip(BANDS, self.density_worst))
+            f"{b} {d:+.3f}" for b, d in zip(bands, self.density_worst))
             + f" (tolerance {t.density}); row {self.row_worst:+.3f} at {self.row_where_mm:.2f} mm "
             f"(tolerance {t.row}); shift {self.shift_worst_um:+.1f} um at {self.shift_where_mm:.2f} mm "
             f"(tolerance {t.shift_um} um)")
         return "\n".join(lines)
 
 
+def scan_format(path) -> tuple[float, bool]:
+    """(dpi, grey) of a scan TIFF: what its prediction must be made at."""
+    import tifffile
+    from .calibrate import CalibrationError
+    with tifffile.TiffFile(str(path)) as tif:
+        page = tif.pages[0]
+        res, unit = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
+        if res is None:
+            raise CalibrationError(f"{path}: no resolution tags: the scan's dpi is unknown")
+        num, den = res.value
+        dpi = num / den * (2.54 if unit is not None and int(unit.value) == 3 else 1.0)
+        return float(dpi), len(page.shape) == 2 or page.shape[-1] == 1
+
+
 def _darkness(path) -> tuple[np.ndarray, float]:
-    """(darkness (H, W, 3) as a fraction of paper white, dpi)."""
+    """(darkness (H, W, bands) as a fraction of paper white, dpi)."""
     from .calibrate import read_scan_white
     dark, white, dpi = read_scan_white(str(path))
     dark = dark / np.maximum(white, 1.0)[None, None, :]
-    if dark.shape[2] == 1:
-        dark = np.repeat(dark, 3, axis=2)
     return dark.astype(np.float32), dpi
 
 
@@ -116,10 +129,18 @@ def compare_scan(scan, predicted, tolerances: ScanTolerances | None = None) -> S
     t = tolerances or ScanTolerances()
     pred, dpi = _darkness(predicted)
     got, sdpi = _darkness(scan)
+    if abs(sdpi / dpi - 1) > 0.01:           # the finer of the two brought to the coarser's dpi
+        fine, f = (pred, sdpi / dpi) if sdpi < dpi else (got, dpi / sdpi)
+        fine = cv2.resize(fine, (round(fine.shape[1] * f), round(fine.shape[0] * f)),
+                          interpolation=cv2.INTER_AREA).reshape(-1, round(fine.shape[1] * f), fine.shape[2])
+        pred, got = (fine, got) if sdpi < dpi else (pred, fine)
+        dpi = min(dpi, sdpi)
+    if pred.shape[2] != got.shape[2]:        # a grey scan: the prediction's bands averaged
+        pred, got = (pred.mean(axis=2, keepdims=True) if pred.shape[2] > 1 else pred,
+                     got.mean(axis=2, keepdims=True) if got.shape[2] > 1 else got)
     res = ScanComparison(dpi=dpi, tolerances=t)
-    if abs(sdpi / dpi - 1) > 0.05:           # another resolution: brought to the prediction's
-        got = cv2.resize(got, (round(got.shape[1] * dpi / sdpi), round(got.shape[0] * dpi / sdpi)),
-                         interpolation=cv2.INTER_AREA)
+    res.density_worst = [0.0] * pred.shape[2]
+    res.density_where_mm = [(0.0, 0.0)] * pred.shape[2]
     try:
         M, res.correlation = _register(pred, got)
     except ValueError as exc:
@@ -139,7 +160,7 @@ def compare_scan(scan, predicted, tolerances: ScanTolerances | None = None) -> S
                             f"(at least {t.min_correlation}): the scan does not show this job")
     h, w = pred.shape[:2]
     warped = cv2.warpAffine(got, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0).reshape(h, w, -1)
     # where the print is: the prediction's inked area, with a margin of one block
     ink = pred.max(axis=2) > 0.02
     rows_in, cols_in = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
@@ -151,7 +172,8 @@ def compare_scan(scan, predicted, tolerances: ScanTolerances | None = None) -> S
     # 1. density, block by block, per band
     step = max(1, int(round(t.block_mm / pix_mm)))
     blocks = _block_means(diff, step)
-    for b in range(3):
+    bands = BANDS if pred.shape[2] == 3 else ["grey"]
+    for b in range(pred.shape[2]):
         d = blocks[..., b]
         i = np.unravel_index(np.argmax(np.abs(d)), d.shape) if d.size else (0, 0)
         res.density_worst[b] = float(d[i]) if d.size else 0.0
@@ -159,7 +181,7 @@ def compare_scan(scan, predicted, tolerances: ScanTolerances | None = None) -> S
                                    (r0 + (i[0] + 0.5) * step) * pix_mm)
         if abs(res.density_worst[b]) > t.density:
             x, y = res.density_where_mm[b]
-            res.problems.append(f"density: band {BANDS[b]} {res.density_worst[b]:+.3f} of white "
+            res.problems.append(f"density: band {bands[b]} {res.density_worst[b]:+.3f} of white "
                                 f"against the prediction in the {t.block_mm} mm block at "
                                 f"{x:.1f}, {y:.1f} mm (tolerance {t.density})")
     # 2. rows across the print

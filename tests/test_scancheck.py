@@ -116,3 +116,14 @@ def test_the_plugin_compares_the_scan_given_on_the_command_line(chart, tmp_path)
     assert runs["dead"].returncode == 1, out[-3000:]
     assert "does not match the prediction" in out and "a nozzle that does not fire" in out, out[-3000:]
     assert list((tmp_path / "dead").rglob("*-predicted-scan.tif"))     # kept for a look
+
+
+def test_a_grey_scan_at_another_resolution_is_predicted_alike(chart):
+    """assert_scan_matches predicts at the scan's own resolution and mode (here grey, 300
+    dpi) and the comparison holds there too."""
+    path, _, d = chart
+    with api.EmulatedPrinter(faults=[*GLASS, "scan-mode=grey"], scan_dpi=300) as printer:
+        result = printer.print(path, scan_out=d / "grey300.tif", **SETTINGS)
+    assert tifffile.imread(result.scan_path).ndim == 2
+    cmp = assert_scan_matches(result, result.scan_path)
+    assert cmp.ok and cmp.dpi == 300 and len(cmp.density_worst) == 1, cmp.explain()
