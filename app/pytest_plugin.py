@@ -8,7 +8,8 @@ file anywhere can use it:
         assert_media_equals_planes(result, wideprint_rip("chart.tif", passes=2, dpi=300))
 
 Options: --wideprint-device SPEC (default: the in-process emulator), --wideprint-profile
-TOML, --wideprint-artifacts DIR (diff images; default: each test's tmp_path).
+TOML, --wideprint-artifacts DIR (diff images, predicted scans; default: each test's
+tmp_path), --wideprint-scan TIFF (a scan of the print, for assert_scan_matches).
 """
 
 from __future__ import annotations
