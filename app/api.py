@@ -22,11 +22,12 @@ from typing import Any, Iterable
 
 import numpy as np
 
-API_VERSION = "1.0"
+API_VERSION = "1.1"      # 1.1: scans (predict_scan, compare_scan, scan_dpi / scan_out)
 COLORS = "CMYK"
 
 __all__ = ["API_VERSION", "Comparison", "EmulatedPrinter", "PrintResult", "compare",
-           "diff_image", "load_profile", "print_file", "read_planes", "rip", "rip_settings"]
+           "compare_scan", "diff_image", "load_profile", "predict_scan", "print_file",
+           "read_planes", "rip", "rip_settings"]
 
 
 # -- settings and profiles -----------------------------------------------------------------
@@ -93,6 +94,7 @@ class PrintResult:
     settings: Any = None                # the RipSettings it was printed with
     profile: Any = None
     planes: np.ndarray | None = None    # test prints: the pattern's planes
+    scan_path: Path | None = None       # the emulator's scan of the job (scan_out=)
 
     @property
     def ok(self) -> bool:
@@ -119,7 +121,7 @@ class EmulatedPrinter:
 
     def __init__(self, profile=None, *, faults: Iterable[str] | None = None,
                  device: str = "emulator", machine_profile=None,
-                 workdir: str | Path | None = None):
+                 workdir: str | Path | None = None, scan_dpi: float | None = None):
         from ..device_sim.faults import Faults
         from .devices import is_emulator_spec, open_device
         self.profile = profile if profile is not None else load_profile()
@@ -137,17 +139,24 @@ class EmulatedPrinter:
         self.workdir = Path(workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
         self._media: dict[int, Path] = {}
+        self._scans: dict[int, Path] = {}
         self.jobs = 0
+        scan = {}
+        if scan_dpi is not None:            # the emulator scans each job (docs/physical.md)
+            if not self.emulated:
+                raise ValueError("only the emulator scans its prints")
+            scan = dict(scan_path=lambda job: str(self._scans[job]) if job in self._scans else None,
+                        scan_dpi=scan_dpi)
         self.device = open_device(device, self.profile, self.faults if self.emulated else None,
                                   media_path=lambda job: str(self._media[job]) if job in self._media else None,
-                                  machine_profile=machine_profile)
+                                  machine_profile=machine_profile, **scan)
 
     @property
     def emulator(self):
         return self.device.emulator
 
     def print(self, file: str | Path, settings: Any = None, *, media_out: str | Path | None = None,
-              **kw) -> PrintResult:
+              scan_out: str | Path | None = None, **kw) -> PrintResult:
         """Rip and print one file; never raises for a job that fails (the result says why),
         only for settings that are refused (ValueError)."""
         from ..rip.load import ImageError
@@ -160,7 +169,7 @@ class EmulatedPrinter:
             self.jobs += 1
             result.message = str(exc)
             return result
-        return self._run(job, result, media_out)
+        return self._run(job, result, media_out, scan_out)
 
     def print_pattern(self, pattern: str, *, width_mm: float = 100.0, dpi: int = 150,
                       head: str = "K1", nozzle: int = 64,
@@ -174,35 +183,25 @@ class EmulatedPrinter:
                              profile=self.profile, planes=job.planes)
         return self._run(job, result, media_out)
 
-    def _run(self, rip_job, result: PrintResult, media_out) -> PrintResult:
-        from ..driver.job import JobCancelled, JobError, PrintJob
-        from ..rip.load import ImageError
+    def _run(self, rip_job, result: PrintResult, media_out, scan_out=None) -> PrintResult:
         self.jobs += 1
         job_id = self.jobs
         media = Path(media_out) if media_out else self.workdir / f"media-{job_id}.tif"
         if self.emulated:
             self._media[job_id] = media
+            if scan_out is not None:
+                self._scans[job_id] = Path(scan_out)
         events0 = len(self.emulator.events) if self.emulated else 0
-        pj = PrintJob(self.device, rip_job, job_id=job_id)
-        try:
-            pj.run()
-            result.state = "done"
-        except JobCancelled as exc:
-            result.state, result.message = "cancelled", str(exc)
-        except (JobError, ImageError) as exc:
-            result.message = str(exc)
-        finally:
-            rip_job.close()
-        result.report = dict(pj.report.as_dict(), state=result.state,
-                             message=result.message or pj.report.message)
-        if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
-            result.report["layout"] = rip_job.layout.report
+        run = run_job(self.device, rip_job, job_id)
+        result.state, result.message, result.report = run.state, run.message, run.report
         if self.emulated:
             if result.state != "done":
                 self.emulator.abandon_job()      # complete its media file for inspection
             result.events = list(self.emulator.events)[events0:]
             if media.exists():
                 result.media_path, result.media = media, read_planes(media)
+            if job_id in self._scans and self._scans[job_id].exists():
+                result.scan_path = self._scans[job_id]
         return result
 
     def close(self) -> None:
@@ -218,6 +217,54 @@ class EmulatedPrinter:
         self.close()
 
 
+@dataclass
+class JobRun:
+    """What run_job did: the driver's PrintJob, how it ended and its report."""
+    job: Any
+    state: str                          # done | failed | cancelled
+    message: str
+    report: dict
+
+
+def run_job(device, rip_job, job_id: int, *, on_event=None, on_job=None,
+            internal_errors: bool = False) -> JobRun:
+    """The job engine of `EmulatedPrinter.print` and `wideprint print` alike: one ripped job
+    printed on an open device, the RIP job closed after it.  A job that fails or is
+    cancelled does not raise: the JobRun says why (`internal_errors`: any other exception,
+    a bug, too, as "internal error: ..." - a batch goes on; otherwise it propagates).
+    `on_job(print_job)` is called before the job starts (a Ctrl-C handler cancels through
+    it).  The report holds the `print --report` keys, the layout's when there is one, and
+    on the emulator `printer_s`, the job's time on the printer's own clock."""
+    from ..driver.job import JobCancelled, JobError, PrintJob
+    from ..rip.load import ImageError
+    pj = PrintJob(device, rip_job, job_id=job_id, on_event=on_event)
+    if on_job is not None:
+        on_job(pj)
+    state, message = "failed", ""
+    try:
+        pj.run()
+        state = "done"
+    except JobCancelled as exc:
+        state, message = "cancelled", str(exc)
+    except (JobError, ImageError, ValueError, OSError) as exc:
+        # ValueError / OSError: the RIP refused this file midway (e.g. an ICC profile for
+        # another colour space)
+        message = str(exc)
+    except Exception as exc:
+        if not internal_errors:
+            raise
+        message = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        rip_job.close()
+    report = dict(pj.report.as_dict(), state=state, message=message or pj.report.message)
+    if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
+        report["layout"] = rip_job.layout.report
+    if device.emulator is not None:
+        from .devices import emulated_seconds
+        report["printer_s"] = emulated_seconds(device.emulator, job_id)
+    return JobRun(pj, state, message, report)
+
+
 def print_file(file: str | Path, settings: Any = None, *, device: str = "emulator",
                profile=None, faults: Iterable[str] | None = None,
                media_out: str | Path | None = None, **kw) -> PrintResult:
@@ -230,6 +277,28 @@ def print_file(file: str | Path, settings: Any = None, *, device: str = "emulato
         if result.media_path is not None and media_out is None:
             result.media_path = None                    # it was in the temporary folder
         return result
+
+
+def predict_scan(file: str | Path, out: str | Path, settings: Any = None, *, scan_dpi: float = 600,
+                 grey: bool = False, profile=None, **kw) -> Path:
+    """The physical model's prediction of a scan of this job (docs/acceptance.md): the job
+    printed on a perfect emulated machine and scanned at `scan_dpi` without sensor noise,
+    written to `out` (an RGB TIFF, or grey, with its resolution)."""
+    faults = ["scan-noise=0"] + (["scan-mode=grey"] if grey else [])
+    with tempfile.TemporaryDirectory(prefix="wideprint-predict-") as d:
+        with EmulatedPrinter(profile, faults=faults, workdir=d, scan_dpi=scan_dpi) as printer:
+            result = printer.print(file, settings, scan_out=out, **kw)
+    if not result.ok:
+        raise ValueError(f"{file}: the prediction's print failed: {result.message}")
+    return Path(out)
+
+
+def compare_scan(scan: str | Path, predicted: str | Path, tolerances=None):
+    """A scan of a print against the predicted scan (predict_scan): registered, then ink
+    density, rows and dot positions within `tolerances` (a ScanTolerances; the defaults are
+    docs/acceptance.md's).  Returns a ScanComparison: `ok`, `problems`, `explain()`."""
+    from .scancheck import compare_scan as _compare
+    return _compare(scan, predicted, tolerances)
 
 
 # -- comparing ------------------------------------------------------------------------------

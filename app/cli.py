@@ -238,8 +238,8 @@ def cmd_print(args) -> int:
     import os
     import tempfile
     from ..device_sim.faults import Faults
+    from .api import run_job
     from .devices import is_emulator_spec, open_device
-    from ..driver.job import JobCancelled, JobError, PrintJob
     from ..driver.link import LinkError
     from ..driver.printer import Printer
     from ..rip.load import ImageError
@@ -377,18 +377,25 @@ def cmd_print(args) -> int:
                                                "file": file, "event": kind, **data},
                                               default=str) + "\n")
                     log_json.flush()
-            job = PrintJob(dev, rip, job_id=job_id, on_event=on_event)
-            current["job"] = job
-            try:
-                rep = job.run().as_dict()
-                rep["job_id"] = job_id
+            run = run_job(dev, rip, job_id, on_event=on_event, internal_errors=True,
+                          on_job=lambda job: current.__setitem__("job", job))
+            rep = dict(run.report, job_id=job_id)
+            if run.state == "cancelled":
+                progress(0, 1, "", final=True)
+                failed += 1
+                reports.append(job_failed(f, run.message, rep, "CANCELLED"))
+                break
+            if run.state != "done":
+                progress(0, 1, f"{label} failed", final=True)
+                failed += 1
+                rep = job_failed(f, run.message, rep)
+            else:
                 progress(1, 1, f"{label} done", final=True)
                 rep["media"] = media_file if args.media_out else None
                 if args.scan_out:
                     rep["scan"] = scans[job_id]
                 if dev.emulator is not None:
-                    stats = dev.emulator.jobs_done.get(job_id, {})
-                    rep["stray_drops"] = stats.get("stray")
+                    rep["stray_drops"] = dev.emulator.jobs_done.get(job_id, {}).get("stray")
                 print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
@@ -396,7 +403,6 @@ def cmd_print(args) -> int:
                       + (f", scan {shown(rep['scan'])}" if rep.get("scan") else ""), file=say)
                 if rip.layout is not None:
                     from ..rip.layout import layout_line
-                    rep["layout"] = rip.layout.report
                     rep["files"] = [f, *extras[i]]
                     print(f"{shown(f, NAME_LIMIT)}: {layout_line(rep['layout'])}", file=say)
                 if args.preview:
@@ -416,25 +422,6 @@ def cmd_print(args) -> int:
                         if not args.media_out:
                             with contextlib.suppress(OSError):
                                 os.unlink(media_file)
-            except JobCancelled as exc:
-                progress(0, 1, "", final=True)
-                failed += 1
-                reports.append(job_failed(f, str(exc), dict(job.report.as_dict(), job_id=job_id),
-                                          "CANCELLED"))
-                break
-            except (JobError, ImageError, ValueError, OSError) as exc:
-                # ValueError/OSError: the RIP refused this file midway (e.g. an ICC profile
-                # for another colour space); the next files still print
-                progress(0, 1, f"{label} failed", final=True)
-                failed += 1
-                rep = job_failed(f, str(exc), dict(job.report.as_dict(), job_id=job_id))
-            except Exception as exc:  # noqa: BLE001 - one job's bug must not lose the batch
-                progress(0, 1, f"{label} failed", final=True)
-                failed += 1
-                rep = job_failed(f, f"internal error: {type(exc).__name__}: {exc}",
-                                 dict(job.report.as_dict(), job_id=job_id))
-            finally:
-                rip.close()
             reports.append(rep)
     finally:
         try:

@@ -107,3 +107,18 @@ def close_device(dev: "Device") -> None:
             dev.emulator.close()
     finally:
         dev.close()
+
+
+def emulated_seconds(printer, job_id: int) -> float | None:
+    """How long the emulated printer took for a job in its own (simulated) time: from the
+    job's JOB_BEGIN to its JOB_END, or to now for a job that stopped; what the real printer
+    would take.  None when the event log no longer holds the job's start."""
+    end = None
+    for e in reversed(printer.events):
+        if e.get("job") != job_id:
+            continue
+        if e["event"] == "job_end" and end is None:
+            end = e["t"]
+        elif e["event"] == "job_begin":
+            return round((printer.time if end is None else end) - e["t"], 3)
+    return None

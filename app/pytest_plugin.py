@@ -8,7 +8,8 @@ file anywhere can use it:
         assert_media_equals_planes(result, wideprint_rip("chart.tif", passes=2, dpi=300))
 
 Options: --wideprint-device SPEC (default: the in-process emulator), --wideprint-profile
-TOML, --wideprint-artifacts DIR (diff images; default: each test's tmp_path).
+TOML, --wideprint-artifacts DIR (diff images, predicted scans; default: each test's
+tmp_path), --wideprint-scan TIFF (a scan of the print, for assert_scan_matches).
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ def pytest_addoption(parser):
     group.addoption("--wideprint-artifacts", default=None, metavar="DIR",
                     help="where failing comparisons write their diff images "
                          "(default: the test's tmp_path)")
+    group.addoption("--wideprint-scan", default=None, metavar="TIFF",
+                    help="a scan of the print (with its resolution tags): assert_scan_matches "
+                         "compares it with the physical model's prediction")
 
 
 def pytest_configure(config):
@@ -58,6 +62,13 @@ def _wideprint_running_test(request):
 def wideprint_device(request) -> str:
     """The device spec the tests print on."""
     return request.config.getoption("--wideprint-device")
+
+
+@pytest.fixture
+def wideprint_scan(request) -> Path | None:
+    """The scan given with --wideprint-scan, or None."""
+    scan = request.config.getoption("--wideprint-scan")
+    return Path(scan) if scan else None
 
 
 @pytest.fixture
@@ -207,3 +218,27 @@ def assert_nothing_printed_after_fault(result: api.PrintResult):
 
 __all__ = ["assert_fault", "assert_ink_within", "assert_media_equals_planes",
            "assert_no_underrun", "assert_nothing_printed_after_fault"]
+
+
+def assert_scan_matches(result: api.PrintResult, scan=None, *, tolerances=None):
+    """A scan of the printed job (default: --wideprint-scan) against the physical model's
+    prediction of it (api.predict_scan at the scan's resolution and mode, api.compare_scan,
+    docs/acceptance.md): registered, then ink density, rows and dot positions within the
+    tolerances.  Without a scan the assertion checks nothing (a real printer whose print
+    was not scanned): the media and device assertions stand."""
+    from .scancheck import scan_format
+    request = _RUNNING[-1] if _RUNNING else None
+    if scan is None and request is not None:
+        scan = request.config.getoption("--wideprint-scan")
+    if scan is None:
+        return None
+    out = (_artifacts() or Path(result.file).parent) / f"{Path(result.file).stem}-predicted-scan.tif"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    dpi, grey = scan_format(scan)
+    api.predict_scan(result.file, out, result.settings, scan_dpi=dpi, grey=grey,
+                     profile=result.profile)
+    cmp = api.compare_scan(scan, out, tolerances)
+    if not cmp.ok:
+        raise AssertionError(f"{Path(scan).name} against the prediction of {result.file} "
+                             f"({out}):\n{cmp.explain()}")
+    return cmp

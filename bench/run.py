@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SCRIPTS = ["halftone_bench.py", "rip_bench.py", "quality_bench.py", "emulator_bench.py", "flow_bench.py",
+SCRIPTS = ["halftone_bench.py", "rip_bench.py", "quality_bench.py", "emulator_bench.py", "print_bench.py", "flow_bench.py",
            "pdf_bench.py", "layout_bench.py"]
 
 if __name__ == "__main__":

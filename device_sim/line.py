@@ -14,12 +14,17 @@ its first fire is a starvation (docs/protocol.md 2.7):
 
 from __future__ import annotations
 
+from bisect import bisect_right
+
 import numpy as np
 
 from ..driver import protocol as P
 from .head import serial_order
 from .motion import ramp_counts
 from .servo import ServoMove
+
+
+_EDGE_NOZZLES = np.array([0x0001, 0x8000], np.uint16)     # nozzles 0 and 127: data there is HEAD_DATA
 
 
 class LineRun:
@@ -53,6 +58,9 @@ class LineRun:
         """Fires i0.. happen on this move."""
         self.move, self.t_seg = move, t_start
         self.t_fire[i0:] = t_start + move.time_at(self.columns[i0:] * self.k)
+        # the same times as a list, for the per-block search (bisect holds the GIL: a numpy
+        # search of the whole line lets other threads take it for milliseconds)
+        self._t_list = self.t_fire.tolist()
 
     # -- faults known when the line starts ----------------------------------------------------
     def _stop_at(self, index: int, fault: P.Fault, head: int = 0xFF) -> None:
@@ -117,7 +125,7 @@ class LineRun:
                 if not self._starve(first, P.Fault.FIFO_UNDERRUN):
                     return True
                 continue
-            consumed = min(int(np.searchsorted(self.t_fire, load_t, side="right")), first)
+            consumed = bisect_right(self._t_list, load_t, 0, first)
             level = first - consumed
             self.min_level = level if self.min_level is None else min(self.min_level, level)
             fpga.fired = consumed            # the line has run up to this block's DMA
@@ -192,9 +200,10 @@ class LineRun:
         if count <= 0:
             return
         words = block.words[:, :count]
-        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3)
-        bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
-        if bad.any():
+        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3): both
+        # looked at in one operation (words 0 and 7 of every fire), the culprit only if set
+        if (words[:, :, ::7] & _EDGE_NOZZLES).any():
+            bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
             part, fire = np.argwhere(bad)[np.argmin(np.argwhere(bad)[:, 1])]
             mask_heads = [h for h in range(self.printer.n_heads) if block.head_mask >> h & 1]
             self._stop_at(first + int(fire), P.Fault.HEAD_DATA, mask_heads[int(part)])

@@ -8,6 +8,8 @@ the heads: memory is bounded by the swath, not by the job's length.
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 from numba import njit
 
@@ -17,25 +19,63 @@ from ..rip.planes import PlanesWriter
 @njit(cache=True, nogil=True)
 def _land_words(win, base, height, width, words, cols, nozzle_rows, nozzle_dcols, channel):
     """Scatter the drops of packed fire words: bit z of fire f lands at
-    (nozzle_rows[z], cols[f] + nozzle_dcols[z]).  Returns (landed, stray, late)."""
+    (nozzle_rows[z], cols[f] + nozzle_dcols[z]).  Returns (landed, stray, late).
+
+    Nozzle by nozzle: each nozzle's drops go to one media row, so the writes walk along
+    that row (the fires' columns are consecutive) instead of jumping between 128 rows."""
     landed = stray = late = 0
     nwin = win.shape[0]
-    for f in range(words.shape[0]):
-        for w in range(8):
-            v = words[f, w]
-            if v == 0:
-                continue
-            for b in range(16):
-                if v & (1 << b):
-                    r = nozzle_rows[w * 16 + b]
-                    c = cols[f] + nozzle_dcols[w * 16 + b]
-                    if r < 0 or r >= height or c < 0 or c >= width:
-                        stray += 1
-                    elif r < base:
-                        late += 1
-                    elif r - base < nwin:
-                        win[r - base, c, channel] += 1
-                        landed += 1
+    n = words.shape[0]
+    if n == 0:
+        return 0, 0, 0
+    cmin, cmax = cols.min(), cols.max()
+    step = 0                                     # +1 / -1: the fires' columns are consecutive
+    if n > 1 and cmax - cmin == n - 1 and abs(cols[1] - cols[0]) == 1:
+        step = cols[1] - cols[0]
+        for f in range(1, n):
+            if cols[f] - cols[f - 1] != step:
+                step = 0
+                break
+    for z in range(words.shape[1] * 16):
+        w = z >> 4
+        bit = np.uint16(1 << (z & 15))
+        r = nozzle_rows[z]
+        d = nozzle_dcols[z]
+        if r < 0 or r >= height or r < base or r - base >= nwin:
+            hits = 0
+            for f in range(n):
+                if words[f, w] & bit:
+                    hits += 1
+            if r < 0 or r >= height:
+                stray += hits
+            elif r < base:
+                late += hits
+            continue
+        row = win[r - base]
+        if cmin + d >= 0 and cmax + d < width:      # every column on the paper: no branch
+            shift = z & 15
+            hits = 0
+            if step != 0:                          # consecutive columns: a strided walk
+                c0 = cols[0] + d
+                for f in range(n):
+                    v = np.uint8((words[f, w] >> shift) & 1)
+                    row[c0 + step * f, channel] += v
+                    hits += v
+            else:
+                for f in range(n):
+                    v = (words[f, w] >> shift) & 1
+                    row[cols[f] + d, channel] += v
+                    hits += v
+            landed += hits
+            continue
+        for f in range(n):
+            if words[f, w] & bit:
+                c = cols[f] + d
+                if c < 0 or c >= width:
+                    stray += 1
+                else:
+                    row[c, channel] += 1
+                    landed += 1
     return landed, stray, late
 
 
@@ -93,12 +133,14 @@ class Media:
             blank = np.zeros((min(n - n_win, win.shape[0]), self.width, 4), np.uint8)
             for r in range(n_win, n, blank.shape[0] or 1):      # rows past the window: empty
                 self._writer.write(blank[:min(blank.shape[0], n - r)])
-        # the rows left move up in place, a block of n_win rows at a time (blocks that do
-        # not overlap: no temporary copy of the window, which is the job's width x a swath)
-        for r in range(0, win.shape[0] - n_win, n_win):
-            m = min(n_win, win.shape[0] - n_win - r)
-            win[r:r + m] = win[r + n_win:r + n_win + m]
-        win[-n_win:] = 0
+        # shift the window up in place (one memmove, no copy of the job's width x a swath;
+        # the writer keeps no view of it)
+        keep = win.shape[0] - n_win
+        if keep:
+            row_bytes = win.strides[0]
+            ctypes.memmove(win.ctypes.data, win.ctypes.data + n_win * row_bytes,
+                           keep * row_bytes)
+        win[keep:] = 0
         self._base = row
 
     def close(self) -> None:

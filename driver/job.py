@@ -29,6 +29,7 @@ log = logging.getLogger("wideprint.job")
 
 HEAD_MASK_ALL = 0xFF
 MAX_RECOVERIES = 5          # reconnections per stroke (or other step) before the job fails
+STREAMING_POLL_S = 0.01     # status polls while a stroke's data streams (any device)
 
 
 def resume_stroke(checkpoint: dict) -> int:
@@ -405,7 +406,13 @@ class PrintJob:
                 return st
             if time.monotonic() > deadline:
                 raise JobError(f"stroke {stroke.index}: the line did not finish")
-            time.sleep(self.poll_interval or 0.001)
+            if streamer.done:
+                time.sleep(self.poll_interval or 0.001)
+            else:
+                # while the data streams, status every 10 ms is enough (a real printer's
+                # pace); an in-process device polled every millisecond takes the
+                # interpreter from the streaming thread that drives it
+                streamer.wait(max(self.poll_interval, STREAMING_POLL_S))
 
     # -- the whole job -------------------------------------------------------------------------
     def run(self) -> JobReport:

@@ -16,11 +16,35 @@ class StreamError(ConnectionError):
 
 
 def stroke_blocks(stroke: int, words: np.ndarray, block_fires: int, head_mask: int):
-    """Yield (first_fire, encoded block) for a stroke's words (heads, fires, 8)."""
-    fires = words.shape[1]
-    for first in range(0, fires, block_fires):
-        part = words[:, first:first + block_fires]
-        yield first, P.encode_block(stroke, first, head_mask, part)
+    """Yield (first_fire, encoded block) for a stroke's words (heads, fires, 8): the bytes
+    of P.encode_block (docs/protocol.md 3.1), the whole blocks of the stroke made at once
+    (one transposing copy, the headers as an array, a CRC each), the last partial one by
+    encode_block itself."""
+    parts, fires = words.shape[0], words.shape[1]
+    whole = fires // block_fires if parts and block_fires > 0 else 0
+    if whole:
+        size = 2 * parts * block_fires * P.WORDS_PER_FIRE
+        hdr = P.BLOCK_HEADER.size
+        buf = np.empty((whole, hdr + size + 4), np.uint8)
+        head = np.zeros(whole, np.dtype([("magic", "S4"), ("kind", "u1"), ("mask", "u1"),
+                                         ("fires", "<u2"), ("stroke", "<u4"), ("first", "<u4"),
+                                         ("words", "<u4")]))
+        head["magic"], head["kind"], head["mask"] = P.BLOCK_MAGIC, P.BLOCK_DATA, head_mask
+        head["fires"], head["stroke"] = block_fires, stroke
+        head["first"] = np.arange(whole, dtype=np.uint32) * block_fires
+        head["words"] = parts * block_fires * P.WORDS_PER_FIRE
+        buf[:, :hdr] = head.view(np.uint8).reshape(whole, hdr)
+        payload = buf[:, hdr:hdr + size].view("<u2").reshape(whole, parts, block_fires,
+                                                              P.WORDS_PER_FIRE)
+        payload[:] = words[:, :whole * block_fires].reshape(
+            parts, whole, block_fires, P.WORDS_PER_FIRE).transpose(1, 0, 2, 3)
+        crc = buf[:, hdr + size:].view("<u4")
+        for b in range(whole):
+            crc[b, 0] = P.crc32(buf[b, :hdr + size])
+        for b in range(whole):
+            yield b * block_fires, buf[b].tobytes()
+    for first in range(whole * block_fires, fires, block_fires):
+        yield first, P.encode_block(stroke, first, head_mask, words[:, first:first + block_fires])
 
 
 class StrokeStreamer:
@@ -113,6 +137,13 @@ class StrokeStreamer:
                 self.pump(0.02)
         except BaseException as exc:  # handed to the job thread
             self.error = exc
+
+    def wait(self, timeout: float) -> None:
+        """Until the streaming thread has sent everything (or failed), at most `timeout`."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        else:
+            time.sleep(timeout)
 
     def stop(self) -> None:
         self._stop.set()

@@ -110,6 +110,7 @@ class PlanesWriter:
         self._rows = 0
         workers = workers or max(1, min(2, os.cpu_count() or 1))
         self._deflate = _deflate()
+        self._blank: bytes | None = None        # a deflated tile of blank paper
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="planes-deflate")
         # futures of encoded bands in file order; bounded: memory is a few bands
         self._q: queue.Queue = queue.Queue(maxsize=workers + 1)
@@ -170,15 +171,23 @@ class PlanesWriter:
         out = []
         for x in range(0, self.width, tw):       # a tile at a time: memory is a tile
             ww = min(tw, self.width - x)
+            part = band[:, x // 2:(x + ww + 1) // 2] if kind == "nibbles" else band[:, x:x + ww]
+            if not part.any():                    # blank paper: the same bytes every time
+                out.append(self._blank_tile())
+                continue
             if n < th or ww < tw:
                 tile[:] = 0
             if kind == "nibbles":                 # tiles are 1024 wide: x // 2 is exact
-                part = band[:, x // 2:(x + ww + 1) // 2]
                 tile[:n, :ww] = np.unpackbits(part, axis=1, count=ww * 4).reshape(n, ww, 4)
             else:
-                tile[:n, :ww] = band[:, x:x + ww]
+                tile[:n, :ww] = part
             out.append(self._deflate(tile))
         return out, dots
+
+    def _blank_tile(self) -> bytes:
+        if self._blank is None:
+            self._blank = self._deflate(np.zeros(TILE + (4,), np.uint8))
+        return self._blank
 
     # -- the caller's side ----------------------------------------------------------------
     def write(self, rows: np.ndarray) -> None:
