@@ -23,6 +23,7 @@ log = logging.getLogger("wideprint.server")
 
 # printer job ids of test prints: above every spool job id (docs/server.md, "Test prints")
 TEST_PRINT_BASE = 0x8000_0000
+CARE_RETRY_S = 30.0                  # idle head care on a printer that did not answer
 
 
 # -- the worker -------------------------------------------------------------------------------
@@ -55,6 +56,7 @@ class Worker(threading.Thread):
         self.care = None                   # the printer's head-care schedule (HeadCare)
         self.capped: bool | None = None    # as last seen (None: not known yet)
         self._idle_since = time.monotonic()
+        self._care_retry = 0.0             # idle head care paused until then (link down)
         self.live = None                   # an emulated printer's media as it lands (LiveMedia)
         self.paper_mm: float | None = None # the paper's width as last measured
         self._test_ids = 0
@@ -267,7 +269,7 @@ class Worker(threading.Thread):
     def _keep_wet(self) -> None:
         """Idle: spit every spit interval, park and cap after cap_after_s.  Only a printer
         this server has opened (an unopened one is left as it is), never one with a fault."""
-        if self.dev is None or self.fault:
+        if self.dev is None or self.fault or time.monotonic() < self._care_retry:
             return
         from ...driver.link import DeviceError, LinkError
         from ...driver.printer import PrinterFault
@@ -276,7 +278,11 @@ class Worker(threading.Thread):
             care.idle(self._idle_since)
             self.capped = bool(care.status().capped) if care.active else None
         except (LinkError, DeviceError, PrinterFault, OSError) as exc:
-            log.warning("printer %s: head care while idle: %s", self.name_, exc)
+            # an unreachable printer is tried again in a while, not every half second
+            log.warning("printer %s: head care while idle: %s (again in %.0f s)", self.name_,
+                        exc, CARE_RETRY_S)
+            self._care_retry = time.monotonic() + CARE_RETRY_S
+            self.care, self.capped = None, None
 
     def service(self, action: str, mask: int, amount: int | None, timeout: float = 120.0) -> dict:
         """Spit, purge, cap or uncap between jobs (the printer's queue may be paused):
