@@ -37,6 +37,7 @@ PCI_BYTES_S = 60e6           # effective PLX9054 DMA rate (33 MHz, 32 bit, with 
 HOME_SPEED_MM_S = 50.0
 POWER_UP_POSITION = 23_456   # where the carriage happens to be at power-up (counts from the left switch)
 SHEET_LEFT_MM = 320.0        # the emulator's sheet: left edge this far from the left switch
+MEDIA_MARGIN_ROWS = 64       # media window rows beyond the swath (4.4 mm at 68.55 um a row)
 
 
 class Printer:
@@ -536,8 +537,10 @@ class Printer:
         # drops pushed up the paper (negative y offsets) land on rows this much above slot 0
         self._y_slack_nm = 1000 * max(0.0, -min(float(geo.static_dy_um(h).min())
                                                 for h in range(self.n_heads)))
+        # the window: the swath, what drops pushed up (slack) or down (a head's or nozzle's
+        # y offset, the feed's error) may reach, and a margin; rows leave it at each feed
         self.media = Media(width, height, dpi, 25.4e6 / row_nm,
-                           window_rows=self.profile.swath_rows + 256
+                           window_rows=self.profile.swath_rows + MEDIA_MARGIN_ROWS
                            + int(self._y_slack_nm // row_nm), path=path)
         scan = self.scan_path(job) if callable(self.scan_path) else self.scan_path
         if scan:
