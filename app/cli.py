@@ -743,9 +743,28 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _give_back_big_buffers() -> None:
+    """glibc raises its mmap threshold to the size of each large block freed (up to 32 MiB),
+    so the RIP's band buffers soon come from the heap arenas, and freed they stay in the
+    process's memory, fragmented among threads (an arena each, up to 8 per core).  A fixed
+    threshold keeps every buffer of 256 KiB or more an mmap of its own, returned when freed,
+    and two arenas hold the rest (bench/README.md: 40-55 MB less peak RSS at 40,000 px wide,
+    no measurable time).  Before any thread starts."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 256 * 1024)        # M_MMAP_THRESHOLD (glibc)
+        libc.mallopt(-8, 2)                 # M_ARENA_MAX: the RIP's few threads share two
+    except (OSError, AttributeError):       # not glibc: its own policy stays
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    _give_back_big_buffers()
     import logging                  # here: `--help` and usage errors never need it
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")

@@ -25,7 +25,7 @@ from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the se
 from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
 
 
-BAND_PIXELS = 1 << 20     # pixels per band, at most (RipJob.band_rows)
+BAND_PIXELS = 1 << 19     # pixels per band, at most (RipJob.band_rows)
 
 
 def prefetch(items: Iterator, depth: int = 2) -> Iterator:
@@ -166,7 +166,7 @@ class RipJob(PrintableJob):
     @property
     def band_rows(self) -> int:
         """Rows per band: the setting's (64), fewer on wide images so that a band stays
-        about BAND_PIXELS (a 40,000 px wide job's bands are 26 rows: every stage holds a
+        about BAND_PIXELS, 16 at least (a 40,000 px wide job's bands are 16 rows: every stage holds a
         band or two of it, bits identical for any banding)."""
         return max(1, min(self.settings.band_rows, max(16, BAND_PIXELS // max(1, self.width))))
 
