@@ -48,7 +48,9 @@ def _rgb_of_png(png: bytes) -> np.ndarray | None:
     img = img.convertToFormat(QImage.Format_RGB888)
     w, h, bpl = img.width(), img.height(), img.bytesPerLine()
     a = np.frombuffer(img.constBits(), np.uint8, count=bpl * h).reshape(h, bpl)
-    return np.ascontiguousarray(a[:, :w * 3].reshape(h, w, 3))
+    # a copy, always: `a` is a view of the QImage's pixels, which go with `img` on return
+    # (ascontiguousarray would hand the view itself back when the rows have no padding)
+    return a[:, :w * 3].reshape(h, w, 3).copy()
 
 
 def _m2(a: float) -> str:
