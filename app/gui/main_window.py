@@ -600,7 +600,7 @@ class MainWindow(QMainWindow):
         self.link.call(lambda c: c.printer_action(printer, what, body),
                        lambda r: log.info("printer %s: %s%s%s", printer, what, detail,
                                           f": {r['message']}" if isinstance(r, dict) and
-                                          r.get("message") else ""))
+                                          r.get("message") else ""), ordered=True)
 
     def _update_actions(self) -> None:
         jobs = self.selected_jobs()

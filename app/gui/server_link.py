@@ -116,6 +116,10 @@ class ServerLink(QObject):
         self._local = threading.local()
         self.pool = QThreadPool(self)
         self.pool.setMaxThreadCount(3)
+        # machine commands in the order the operator gave them (spit, then cap: never the
+        # other way round because two pool threads raced)
+        self.ordered = QThreadPool(self)
+        self.ordered.setMaxThreadCount(1)
         self._stop = threading.Event()
         self._events: threading.Thread | None = None
         self._resp = None
@@ -134,9 +138,11 @@ class ServerLink(QObject):
             self._local.client = c
         return c
 
-    def call(self, fn, done=None, failed=None) -> None:
-        """fn(client) on the pool; done(result) or failed(message) on the UI thread."""
-        self.pool.start(_Call(self, fn, done, failed or self.requestFailed.emit))
+    def call(self, fn, done=None, failed=None, ordered: bool = False) -> None:
+        """fn(client) on the pool; done(result) or failed(message) on the UI thread.
+        `ordered`: one after the other, in the order of the calls (printer commands)."""
+        (self.ordered if ordered else self.pool).start(
+            _Call(self, fn, done, failed or self.requestFailed.emit))
 
     def call_now(self, fn):
         """fn(client) on this thread (start-up, tests)."""
@@ -158,6 +164,7 @@ class ServerLink(QObject):
             except Exception:  # noqa: BLE001
                 pass
         self.pool.waitForDone(3000)
+        self.ordered.waitForDone(3000)
 
     def _rediscover(self) -> None:
         """The server restarted (another port): read server.json again."""
