@@ -10,6 +10,10 @@ SAMPLE := resources/samples/sample.tif
 # the IPP Everywhere Printer Application (docs/ipp.md): C against PAPPL (libpappl-dev)
 IPP_BIN := app/ipp/wideprint-ipp
 IPP_SRC := app/ipp/wideprint-ipp.c
+# avahi for the DNS-SD test (tests/private_mdns.py): Debian's avahi-daemon and avahi-utils
+# unpacked, not installed - the test runs its own daemon in private namespaces and the
+# machine gets no mDNS service of its own (docs/ipp.md "DNS-SD")
+AVAHI  := build/avahi/.unpacked
 
 .PHONY: demo test install bench clean
 
@@ -25,6 +29,14 @@ $(IPP_BIN): $(IPP_SRC)
 	@pkg-config --exists pappl || { echo "make: $(IPP_BIN) needs PAPPL: apt-get install libpappl-dev pkg-config (resources/debian-packages.txt; .ci/run installs them)" >&2; exit 1; }
 	$(CC) -Wall -Wextra -O2 -o $@ $< $$(pkg-config --cflags --libs pappl) -ltiff -lpthread
 
+$(AVAHI):
+	@command -v apt-get >/dev/null && command -v dpkg-deb >/dev/null || { echo "make: the DNS-SD test needs Debian's avahi-daemon and avahi-utils packages (apt-get download)" >&2; exit 1; }
+	rm -rf build/avahi && mkdir -p build/avahi/deb
+	cd build/avahi/deb && apt-get download -q avahi-daemon avahi-utils 2>&1 | grep -v '^W: Download is performed unsandboxed' || true
+	@ls build/avahi/deb/avahi-daemon_*.deb build/avahi/deb/avahi-utils_*.deb >/dev/null || { echo "make: apt-get download avahi-daemon avahi-utils failed (run apt-get update?)" >&2; exit 1; }
+	for deb in build/avahi/deb/*.deb; do dpkg-deb -x $$deb build/avahi; done
+	touch $@
+
 install: $(STAMP) $(IPP_BIN)
 
 demo: $(STAMP)
@@ -36,7 +48,7 @@ demo: $(STAMP)
 	$(BIN)/python -m wideprint.app.compare $(OUT)/media.tif $(OUT)/planes.tif
 	@echo "demo: media $(OUT)/media.tif (picture $(OUT)/media.png), report $(OUT)/report.json, events $(OUT)/events.jsonl"
 
-test: $(STAMP) $(IPP_BIN)
+test: $(STAMP) $(IPP_BIN) $(AVAHI)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
 bench: $(STAMP)

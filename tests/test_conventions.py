@@ -132,7 +132,8 @@ def test_ci_installs_what_the_suite_runs():
     listed.discard("")
     provides = {"make": "make", "cupsd": "cups-daemon", "lp": "cups-client", "lpadmin": "cups-client",
                 "gs": "ghostscript", "Xvfb": "xvfb", "systemd-analyze": "systemd",
-                "desktop-file-validate": "desktop-file-utils", "groff": "groff-base"}
+                "desktop-file-validate": "desktop-file-utils", "groff": "groff-base",
+                "ip": "iproute2", "dbus-daemon": "dbus-daemon", "ippfind": "cups-ipp-utils"}
     for tool, pkg in provides.items():
         assert pkg in listed, f"{tool} comes from {pkg}, which resources/debian-packages.txt lacks"
     ci = (ROOT / ".ci" / "run").read_text()

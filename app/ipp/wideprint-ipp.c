@@ -1086,6 +1086,8 @@ main(int argc, char *argv[])
     fprintf(stderr, "wideprint-ipp: cannot create the PAPPL system: %s\n", strerror(errno));
     return (1);
   }
+  if (loopback)
+    papplSystemSetDNSSDName(wp_system, NULL);	// no DNS-SD for a loopback-only system
   if (wp.hostname[0])
     papplSystemSetHostName(wp_system, wp.hostname);
   else if (loopback)
@@ -1122,6 +1124,27 @@ main(int argc, char *argv[])
     {
       fprintf(stderr, "wideprint-ipp: cannot create the printer %s: %s\n", p->name, strerror(errno));
       return (1);
+    }
+    if (loopback)
+      papplPrinterSetDNSSDName(p->printer, NULL);	// nothing to announce: no one else can reach it
+    else
+    {
+      // the name print dialogs list (docs/ipp.md "DNS-SD"): "left - WP-3400 ...", at most
+      // 63 bytes (a DNS label), not cut inside a UTF-8 character
+      char	dnssd[64];
+      size_t	len, lead;
+      unsigned char c;
+
+      snprintf(dnssd, sizeof(dnssd), "%s - %s", p->name, p->make_model[0] ? p->make_model : "wideprint");
+      len = strlen(dnssd);
+      for (lead = len; lead > 0 && ((unsigned char)dnssd[lead - 1] & 0xC0) == 0x80; lead --);
+      if (lead > 0)
+      {
+        c = (unsigned char)dnssd[lead - 1];	// the last character's first byte
+        if ((c >= 0xC0 && len - (lead - 1) < 2) || (c >= 0xE0 && len - (lead - 1) < 3) || (c >= 0xF0 && len - (lead - 1) < 4))
+          dnssd[lead - 1] = '\0';		// cut inside it: drop it
+      }
+      papplPrinterSetDNSSDName(p->printer, dnssd);
     }
     papplPrinterSetSupplies(p->printer, 4, ink);	// ink levels: unknown (-1)
     papplPrinterSetMaxActiveJobs(p->printer, 0);
