@@ -747,15 +747,17 @@ def _give_back_big_buffers() -> None:
     """glibc raises its mmap threshold to the size of each large block freed (up to 32 MiB),
     so the RIP's band buffers soon come from the heap arenas, and freed they stay in the
     process's memory, fragmented among threads (an arena each, up to 8 per core).  A fixed
-    threshold keeps every buffer of 256 KiB or more an mmap of its own, returned when freed,
-    and two arenas hold the rest (bench/README.md: 40-55 MB less peak RSS at 40,000 px wide,
-    no measurable time).  Before any thread starts."""
+    threshold of 4 MiB keeps the big buffers (media window, whole strokes, image rows) an
+    mmap of their own, returned when freed, and two arenas hold the rest.  Not lower: a
+    band's buffers (1-3 MB at full width) would each be a fresh mmap, page-faulted and
+    zeroed at every band - 256 KiB cost `print` 0.55 s and `rip` 0.6 s of 3 at full width
+    for 16 MB less (bench/README.md, "Memory").  Before any thread starts."""
     if not sys.platform.startswith("linux"):
         return
     import ctypes
     try:
         libc = ctypes.CDLL(None)
-        libc.mallopt(-3, 256 * 1024)        # M_MMAP_THRESHOLD (glibc)
+        libc.mallopt(-3, 4 << 20)           # M_MMAP_THRESHOLD (glibc)
         libc.mallopt(-8, 2)                 # M_ARENA_MAX: the RIP's few threads share two
     except (OSError, AttributeError):       # not glibc: its own policy stays
         pass
