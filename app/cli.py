@@ -697,7 +697,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .printer_cli import add_parser as add_printer_parser
     add_printer_parser(sub)       # printer status|home|park|feed|measure|clear-fault
 
-    from .calibrate import add_parser as add_calibrate_parser
+    from .calibrate_cli import add_parser as add_calibrate_parser
     add_calibrate_parser(sub)     # calibrate nozzles|bidir|heads|feed (docs/calibration.md)
 
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
@@ -763,7 +763,17 @@ def _give_back_big_buffers() -> None:
         pass
 
 
+def _one_blas_thread() -> None:
+    """numpy's OpenBLAS starts a thread per core at its first matrix product (the emulator's
+    servo model multiplies 4 x 4 matrices) and those threads spin on after it: ~0.1 CPU-s a
+    job taken from the RIP for nothing.  Before numpy is loaded; OPENBLAS_NUM_THREADS set by
+    the user wins."""
+    import os
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _one_blas_thread()
     ap = build_parser()
     args = ap.parse_args(argv)
     _give_back_big_buffers()
