@@ -9,6 +9,7 @@ the heads: memory is bounded by the swath, not by the job's length.
 from __future__ import annotations
 
 import ctypes
+import sys
 
 import numpy as np
 from numba import njit
@@ -16,15 +17,22 @@ from numba import njit
 from ..rip.planes import PlanesWriter
 
 
+# A dot's 4 inks are 4 bytes side by side: seen as one uint32 per dot, a row's drops of one
+# ink are added with a contiguous walk (vectorised) instead of a 4-byte stride; the ink is a
+# shift.  No carry can cross into the next ink: a dot gets a drop per pass and head at most.
+_INK_SHIFT = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
+
+
 @njit(cache=True, nogil=True)
-def _land_words(win, base, height, width, words, cols, nozzle_rows, nozzle_dcols, channel):
+def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dcols, ink_shift):
     """Scatter the drops of packed fire words: bit z of fire f lands at
-    (nozzle_rows[z], cols[f] + nozzle_dcols[z]).  Returns (landed, stray, late).
+    (nozzle_rows[z], cols[f] + nozzle_dcols[z]), in the ink `ink_shift` selects of the
+    window's uint32 dots.  Returns (landed, stray, late).
 
     Nozzle by nozzle: each nozzle's drops go to one media row, so the writes walk along
     that row (the fires' columns are consecutive) instead of jumping between 128 rows."""
     landed = stray = late = 0
-    nwin = win.shape[0]
+    nwin = win32.shape[0]
     n = words.shape[0]
     if n == 0:
         return 0, 0, 0
@@ -36,45 +44,55 @@ def _land_words(win, base, height, width, words, cols, nozzle_rows, nozzle_dcols
             if cols[f] - cols[f - 1] != step:
                 step = 0
                 break
-    for z in range(words.shape[1] * 16):
-        w = z >> 4
-        bit = np.uint16(1 << (z & 15))
+    nw = words.shape[1]
+    by_word = np.empty((nw, n), np.uint32)      # each word's fires side by side, in column
+    if step == -1:                               # order: a reverse stroke's too
+        cols = cols[::-1]
+        step = 1
+        for f in range(n):
+            for w in range(nw):
+                by_word[w, n - 1 - f] = words[f, w]
+    else:
+        for f in range(n):
+            for w in range(nw):
+                by_word[w, f] = words[f, w]
+    for z in range(nw * 16):
+        fires = by_word[z >> 4]
+        shift = np.uint32(z & 15)
         r = nozzle_rows[z]
         d = nozzle_dcols[z]
         if r < 0 or r >= height or r < base or r - base >= nwin:
             hits = 0
             for f in range(n):
-                if words[f, w] & bit:
-                    hits += 1
+                hits += (fires[f] >> shift) & np.uint32(1)
             if r < 0 or r >= height:
                 stray += hits
             elif r < base:
                 late += hits
             continue
-        row = win[r - base]
+        row = win32[r - base]
         if cmin + d >= 0 and cmax + d < width:      # every column on the paper: no branch
-            shift = z & 15
             hits = 0
-            if step != 0:                          # consecutive columns: a strided walk
-                c0 = cols[0] + d
+            if step == 1:                          # consecutive columns: a contiguous walk
+                row_f = row[cols[0] + d:cols[0] + d + n]
                 for f in range(n):
-                    v = np.uint8((words[f, w] >> shift) & 1)
-                    row[c0 + step * f, channel] += v
+                    v = (fires[f] >> shift) & np.uint32(1)
+                    row_f[f] += v << ink_shift
                     hits += v
             else:
                 for f in range(n):
-                    v = (words[f, w] >> shift) & 1
-                    row[cols[f] + d, channel] += v
+                    v = (fires[f] >> shift) & np.uint32(1)
+                    row[cols[f] + d] += v << ink_shift
                     hits += v
             landed += hits
             continue
         for f in range(n):
-            if words[f, w] & bit:
+            if (fires[f] >> shift) & np.uint32(1):
                 c = cols[f] + d
                 if c < 0 or c >= width:
                     stray += 1
                 else:
-                    row[c, channel] += 1
+                    row[c] += np.uint32(1) << ink_shift
                     landed += 1
     return landed, stray, late
 
@@ -87,6 +105,7 @@ class Media:
         self._writer = PlanesWriter(path, width, height, dpi_x, dpi_y,
                                     description="wideprint emulator media") if path else None
         self._win = np.zeros((max(window_rows, 1), width, 4), np.uint8)
+        self._win32 = self._win.view(np.uint32).reshape(self._win.shape[:2])   # the same bytes
         self._base = 0                       # image row of window row 0
         self.drops = np.zeros(4, np.int64)   # drops that landed in the image area
         self.stray = 0                       # drops outside the image area
@@ -103,12 +122,12 @@ class Media:
         top = int(nozzle_rows.max())
         if top >= self._base + self._win.shape[0]:
             self.flush_below(top - self._win.shape[0] + 1)
-        landed, stray, late = _land_words(self._win, self._base, self.height, self.width,
+        landed, stray, late = _land_words(self._win32, self._base, self.height, self.width,
                                           np.ascontiguousarray(words), cols.astype(np.int64),
                                           nozzle_rows.astype(np.int64),
                                           np.zeros(nozzle_rows.size, np.int64)
                                           if nozzle_dcols is None else nozzle_dcols.astype(np.int64),
-                                          channel)
+                                          np.uint32(_INK_SHIFT[channel]))
         self.drops[channel] += landed
         self.stray += stray
         self.late += late
