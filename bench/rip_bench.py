@@ -374,11 +374,11 @@ def whole_commands(d: str, tif: str, w: int, h: int, repeat: int) -> dict:
     with contextlib.suppress(OSError):
         os.unlink(out)
     r, walls = best_run(wideprint_cmd("--help"), max(5, repeat), env=env)
-    print(fmt_row("wideprint", "--help", 0, r, f"best of {len(walls)}").replace(f"{0:9.1f}", f"{'-':>9s}"))
+    print(fmt_row("wideprint", "--help", 0, r, f"best of {len(walls)}"))
     res[("cli", "--help")] = (0, r)
     r, walls = best_run(wideprint_cmd("rip", small, "-o", out, "--dither", "fs"), repeat, env=env)
     print(fmt_row("wideprint", "rip -o 100 x 100 (fs)", 0, r,
-                  "start-up: imports, numba's cache, a tiny job").replace(f"{0:9.1f}", f"{'-':>9s}"))
+                  "start-up: imports, numba's cache, a tiny job"))
     res[("cli", "small")] = (0, r)
     with contextlib.suppress(OSError):
         os.unlink(out)
@@ -545,8 +545,8 @@ def fmt_row(tool: str, method: str, mpx: float, r: Run | None, note: str = "") -
         return f"{tool:12s} {method:22s} {note}"
     if not r.ok:
         return f"{tool:12s} {method:22s} FAILED: {(r.err or r.out).strip()[-200:]}"
-    return (f"{tool:12s} {method:22s} {r.wall:8.2f} {r.cpu:8.2f} {mpx / r.wall:9.1f} "
-            f"{r.rss_mb:9.0f}  {note}")
+    rate = f"{mpx / r.wall:9.1f}" if mpx else f"{'-':>9s}"      # no pixels: start-up figures
+    return f"{tool:12s} {method:22s} {r.wall:8.2f} {r.cpu:8.2f} {rate} {r.rss_mb:9.0f}  {note}"
 
 
 def verdict(ok: bool) -> str:
