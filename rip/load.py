@@ -307,6 +307,10 @@ def _tiff_header(path: str, size: int, max_pixels: int, max_side: int) -> _Hdr:
             counts = np.asarray(page.databytecounts, dtype=np.int64)
             tiled = bool(page.is_tiled)
             compression = int(page.compression)
+            orientation = tags.get("Orientation")
+            layout = dict(planar=int(page.planarconfig), fillorder=int(page.fillorder),
+                          orientation=int(orientation.value) if orientation is not None else 1,
+                          rowsperstrip=int(page.rowsperstrip))
             xr, yr, unit = tags.get("XResolution"), tags.get("YResolution"), tags.get("ResolutionUnit")
             xres = yres = None
             ru = int(unit.value) if unit is not None else 2
@@ -332,7 +336,8 @@ def _tiff_header(path: str, size: int, max_pixels: int, max_side: int) -> _Hdr:
         raise ImageError(path, f"corrupt TIFF header: {msg}") from None
     hdr.width, hdr.height, hdr.xres, hdr.yres = w, h, xres, yres
     hdr.extra.update(spp=spp, bps=bps, sampleformat=sfmt, photometric=photometric, extrasamples=extrasamples,
-                     inkset=inkset, offsets=offsets, counts=counts, tiled=tiled, compression=compression)
+                     inkset=inkset, offsets=offsets, counts=counts, tiled=tiled, compression=compression,
+                     **layout)
     return hdr
 
 
@@ -898,6 +903,87 @@ class _VipsReader:
             y += n
 
 
+class _StripReader:
+    """Plain strip TIFFs (the common print-shop file: uncompressed or deflate, 8 or 16-bit
+    grey, RGB or CMYK, no alpha, top-left orientation) read strip by strip with tifffile.
+    libvips' sequential TIFF reader keeps ~90 MB of caches for a 40,000 px wide RGB file
+    (bench/README.md, "Memory"); this holds one strip and one band.  The samples are the
+    file's own, as libvips hands them over for these files (tests/test_load.py compares
+    the two).  LZW and PackBits stay with libvips: deflate's checksum and an uncompressed
+    strip's size are what make a damaged strip fail here as surely as there."""
+
+    COMPRESSIONS = (1, 8, 32946)          # none, Adobe deflate, deflate
+    MAX_STRIP_BYTES = 16 << 20            # decoded; a bigger strip would be a band of its own
+
+    def __init__(self, path: str, plan: _VipsPlan, hdr: _Hdr, vips: _VipsReader):
+        self.path, self.plan, self.hdr = path, plan, hdr
+        # resampling and previews take the image through libvips (rip/place.py): the same
+        # pixels, from the libvips reader's own pipeline
+        self.open, self.pipeline = vips.open, vips.pipeline
+
+    @classmethod
+    def fits(cls, hdr: _Hdr, plan: _VipsPlan) -> bool:
+        e = hdr.extra
+        photometric = {1: "grey", 2: "rgb", 5: "cmyk"}.get(e["photometric"])
+        return (not e["tiled"] and e["compression"] in cls.COMPRESSIONS
+                and photometric == plan.colorspace and e["spp"] == plan.colour
+                and plan.alpha is None and not plan.invert and not e["extrasamples"]
+                and e["bps"] == plan.depth and e["sampleformat"] == 1
+                and (e["planar"] == 1 or e["spp"] == 1) and e["fillorder"] == 1
+                and e["orientation"] == 1 and e["inkset"] in (None, 1)
+                and 0 < e["rowsperstrip"] and len(e["offsets"]) == len(e["counts"])
+                and min(e["rowsperstrip"], hdr.height) * hdr.width * e["spp"] * e["bps"] // 8
+                <= cls.MAX_STRIP_BYTES)
+
+    def _strips(self) -> Iterator[np.ndarray]:
+        import tifffile
+        with tifffile.TiffFile(self.path) as tf:
+            page = tf.pages.first if hasattr(tf.pages, "first") else tf.pages[0]
+            fh, n = tf.filehandle, len(page.dataoffsets)
+            rows_done = 0
+            for i, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts)):
+                if rows_done >= self.hdr.height:
+                    return
+                fh.seek(offset)
+                data = fh.read(count)
+                if len(data) != count:
+                    raise ImageError(self.path, f"truncated TIFF: strip {i + 1} of {n} is cut short")
+                try:
+                    strip = page.decode(data, i)[0]
+                except Exception as exc:       # imagecodecs' and tifffile's many kinds
+                    msg = str(exc).strip() or type(exc).__name__
+                    raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n}: "
+                                                f"{msg[:120]}") from None
+                if strip is None or strip.ndim != 4 or strip.shape[2:] != (self.hdr.width, self.plan.colour):
+                    raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n} has the "
+                                                f"wrong size")
+                strip = strip[0, :self.hdr.height - rows_done]
+                rows_done += strip.shape[0]
+                yield strip
+            if rows_done < self.hdr.height:
+                raise ImageError(self.path, f"truncated TIFF: {rows_done} of {self.hdr.height} rows "
+                                            f"in the strips")
+
+    def bands(self, rows: int) -> Iterator[np.ndarray]:
+        dtype = np.uint16 if self.plan.depth == 16 else np.uint8
+        w, c, h = self.hdr.width, self.plan.colour, self.hdr.height
+        y = 0                                  # image rows yielded
+        band = np.empty((min(rows, h), w, c), dtype)
+        filled = 0
+        for strip in self._strips():
+            while strip.shape[0]:
+                take = min(strip.shape[0], band.shape[0] - filled)
+                band[filled:filled + take] = strip[:take]
+                strip, filled = strip[take:], filled + take
+                if filled == band.shape[0]:
+                    yield band
+                    y += filled
+                    if y >= h:
+                        return
+                    band = np.empty((min(rows, h - y), w, c), dtype)
+                    filled = 0
+
+
 FETCH_BYTES = 512 << 10    # bytes per libvips fetch, at most
 FETCH_ROWS = 16            # rows per libvips fetch, at most
 
@@ -1126,6 +1212,8 @@ def _open_vips(path: str, fmt: str, hdr: _Hdr, max_pixels: int, max_side: int) -
         reader.pipeline(img)  # builds (lazily) only: catches impossible band layouts early
     except pv.Error as e:
         raise ImageError(path, _vips_problem(fmt, str(e), path)) from None
+    if fmt == "tiff" and _StripReader.fits(hdr, plan):
+        reader = _StripReader(path, plan, hdr, reader)
     icc = None
     if img.get_typeof("icc-profile-data") != 0:
         try:

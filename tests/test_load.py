@@ -668,3 +668,68 @@ def test_fuzzed_files_never_crash(tmp_path):
     samples = _valid_samples(tmp_path)
     bad = corpus.fuzz_failures(samples, tmp_path, 40, open_image)
     assert not bad, "\n".join(bad)
+
+
+# --------------------------------------------------------------------------
+# plain strip TIFFs: read strip by strip (rip/load.py _StripReader), not through libvips
+# --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels,photometric", [(1, "minisblack"), (3, "rgb"), (4, "separated")])
+@pytest.mark.parametrize("compression,predictor", [(None, False), ("zlib", False), ("zlib", True),
+                                                   ("lzw", False)])
+def test_strip_tiffs_read_the_samples_libvips_reads(tmp_path, dtype, channels, photometric,
+                                                    compression, predictor):
+    from wideprint.rip.load import _StripReader, _VipsReader
+    rng = np.random.default_rng(channels * 7 + np.dtype(dtype).itemsize)
+    for i, (h, w, rps) in enumerate(((61, 47, 7), (5, 3, 1), (40, 33, 1000))):
+        a = rng.integers(0, np.iinfo(dtype).max + 1, (h, w, channels)[:3 if channels > 1 else 2],
+                         dtype=dtype)
+        path = tmp_path / f"s{i}.tif"
+        kw = dict(photometric=photometric, rowsperstrip=rps, byteorder=">" if i == 1 else "<")
+        if compression:
+            kw.update(compression=compression, predictor=predictor)
+        tifffile.imwrite(path, a, **kw)
+        src = open_image(path)
+        # LZW (no checksum: a damaged strip may decode to other pixels silently) stays with libvips
+        assert isinstance(src._reader, _StripReader) == (compression != "lzw")
+        for rows in (1, 5, 256):
+            bands = list(src.bands(rows))
+            assert [b.shape[0] for b in bands[:-1]] == [rows] * (len(bands) - 1)
+            got = np.concatenate(bands)
+            assert np.array_equal(got.reshape(a.shape), a)
+            vips = np.concatenate(list(_VipsReader(str(path), "tiff", src._reader.plan).bands(rows)))
+            assert np.array_equal(got, vips)
+
+
+def test_strip_tiff_with_a_damaged_deflate_strip_fails_naming_the_strip(tmp_path):
+    a = np.random.default_rng(1).integers(0, 256, (64, 50, 3), dtype=np.uint8)
+    path = tmp_path / "damaged.tif"
+    tifffile.imwrite(path, a, photometric="rgb", rowsperstrip=16, compression="zlib")
+    page = tifffile.TiffFile(path).pages[0]
+    off, cnt = int(page.dataoffsets[2]), int(page.databytecounts[2])
+    data = bytearray(path.read_bytes())
+    data[off + cnt // 2:off + cnt // 2 + 8] = bytes(8)
+    path.write_bytes(bytes(data))
+    src = open_image(path)
+    with pytest.raises(ImageError, match=r"damaged.tif: corrupt TIFF data: strip 3 of 4"):
+        list(src.bands(16))
+
+
+def test_strip_tiff_band_memory_does_not_grow_with_the_strips_read(tmp_path):
+    """One strip and one band are held: the bands of a tall file are all fresh arrays of
+    the band's size, and reading is not a whole-image decode."""
+    h, w = 2000, 300
+    a = np.random.default_rng(2).integers(0, 256, (h, w, 3), dtype=np.uint8)
+    path = tmp_path / "tall.tif"
+    tifffile.imwrite(path, a, photometric="rgb", rowsperstrip=64)
+    src = open_image(path)
+    import tracemalloc
+    tracemalloc.start()
+    try:
+        for band in src.bands(32):
+            assert band.shape == (32, w, 3) or band.shape[0] == h % 32
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * 64 * w * 3, peak          # a few strips' worth, not the 1.8 MB image
