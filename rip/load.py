@@ -940,11 +940,29 @@ class _StripReader:
         with tifffile.TiffFile(self.path) as tf:
             page = tf.pages.first if hasattr(tf.pages, "first") else tf.pages[0]
             fh, n = tf.filehandle, len(page.dataoffsets)
+            w, c, h = self.hdr.width, self.plan.colour, self.hdr.height
+            sample = np.dtype(np.uint16 if self.plan.depth == 16 else np.uint8).newbyteorder(tf.byteorder)
+            row_bytes = w * c * sample.itemsize
             rows_done = 0
             for i, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts)):
-                if rows_done >= self.hdr.height:
+                if rows_done >= h:
                     return
                 fh.seek(offset)
+                if page.compression == 1:
+                    # uncompressed: rows straight from the file, ~1 MB at a time
+                    rows_in = min(self.hdr.extra["rowsperstrip"], h - rows_done)
+                    if count < rows_in * row_bytes:
+                        raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n} has "
+                                                    f"{count} bytes for {rows_in} rows of {row_bytes}")
+                    step = max(1, (1 << 20) // row_bytes)
+                    for r in range(0, rows_in, step):
+                        k = min(step, rows_in - r)
+                        data = fh.read(k * row_bytes)
+                        if len(data) != k * row_bytes:
+                            raise ImageError(self.path, f"truncated TIFF: strip {i + 1} of {n} is cut short")
+                        yield np.frombuffer(data, sample).reshape(k, w, c)
+                    rows_done += rows_in
+                    continue
                 data = fh.read(count)
                 if len(data) != count:
                     raise ImageError(self.path, f"truncated TIFF: strip {i + 1} of {n} is cut short")
@@ -954,15 +972,14 @@ class _StripReader:
                     msg = str(exc).strip() or type(exc).__name__
                     raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n}: "
                                                 f"{msg[:120]}") from None
-                if strip is None or strip.ndim != 4 or strip.shape[2:] != (self.hdr.width, self.plan.colour):
+                if strip is None or strip.ndim != 4 or strip.shape[2:] != (w, c):
                     raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n} has the "
                                                 f"wrong size")
-                strip = strip[0, :self.hdr.height - rows_done]
+                strip = strip[0, :h - rows_done]
                 rows_done += strip.shape[0]
                 yield strip
-            if rows_done < self.hdr.height:
-                raise ImageError(self.path, f"truncated TIFF: {rows_done} of {self.hdr.height} rows "
-                                            f"in the strips")
+            if rows_done < h:
+                raise ImageError(self.path, f"truncated TIFF: {rows_done} of {h} rows in the strips")
 
     def bands(self, rows: int) -> Iterator[np.ndarray]:
         dtype = np.uint16 if self.plan.depth == 16 else np.uint8
