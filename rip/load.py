@@ -906,15 +906,16 @@ class _VipsReader:
 class _StripReader:
     """Plain strip TIFFs (the common print-shop file: uncompressed, LZW, deflate or PackBits, 8 or 16-bit
     grey, RGB or CMYK, no alpha, top-left orientation) read strip by strip with tifffile.
-    libvips' sequential TIFF reader keeps ~90 MB of caches for a 40,000 px wide RGB file
-    (bench/README.md, "Memory"); this holds one strip and one band.  The samples are the
+    libvips' sequential TIFF reader keeps ~70 MB of caches for a 40,000 px wide RGB file
+    (bench/README.md, issue 17); this holds a band and one compressed strip decoded, or
+    ~1 MB of an uncompressed one.  The samples are the
     file's own, as libvips hands them over for these files (tests/test_load.py compares
     the two).  A damaged strip fails here at least as often as there (300 single-byte
     damages each: deflate 300 failures against libvips' 287 - its checksum -, LZW the same
     outcomes, PackBits 5 against 2; neither LZW nor PackBits can see every damage)."""
 
     COMPRESSIONS = (1, 5, 8, 32773, 32946)    # none, LZW, Adobe deflate, PackBits, deflate
-    MAX_STRIP_BYTES = 16 << 20            # decoded; a bigger strip would be a band of its own
+    MAX_STRIP_BYTES = 16 << 20            # a compressed strip decoded whole: bigger ones stay with libvips
 
     def __init__(self, path: str, plan: _VipsPlan, hdr: _Hdr, vips: _VipsReader):
         self.path, self.plan, self.hdr = path, plan, hdr
@@ -933,8 +934,8 @@ class _StripReader:
                 and (e["planar"] == 1 or e["spp"] == 1) and e["fillorder"] == 1
                 and e["orientation"] == 1 and e["inkset"] in (None, 1)
                 and 0 < e["rowsperstrip"] and len(e["offsets"]) == len(e["counts"])
-                and min(e["rowsperstrip"], hdr.height) * hdr.width * e["spp"] * e["bps"] // 8
-                <= cls.MAX_STRIP_BYTES)
+                and (e["compression"] == 1 or min(e["rowsperstrip"], hdr.height) * hdr.width
+                     * e["spp"] * e["bps"] // 8 <= cls.MAX_STRIP_BYTES))
 
     def _strips(self) -> Iterator[np.ndarray]:
         import tifffile

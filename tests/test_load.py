@@ -732,3 +732,16 @@ def test_strip_tiff_band_memory_does_not_grow_with_the_strips_read(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 8 * 64 * w * 3, peak          # a few strips' worth, not the 1.8 MB image
+
+
+def test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libvips(tmp_path):
+    """A whole image in one strip (some RIPs write them): uncompressed, it is still read a
+    few rows at a time; compressed, it would be decoded whole, so it stays with libvips."""
+    from wideprint.rip.load import _StripReader, _VipsReader
+    a = np.random.default_rng(3).integers(0, 256, (800, 9000, 3), dtype=np.uint8)   # 21.6 MB
+    for compression, reader in ((None, _StripReader), ("zlib", _VipsReader)):
+        path = tmp_path / f"one_{compression}.tif"
+        tifffile.imwrite(path, a, photometric="rgb", rowsperstrip=800, compression=compression)
+        src = open_image(path)
+        assert type(src._reader) is reader
+        assert np.array_equal(np.concatenate(list(src.bands(64))), a)
