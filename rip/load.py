@@ -903,6 +903,29 @@ class _VipsReader:
             y += n
 
 
+def _reband(chunks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
+    """Re-cut a stream of (h_i, w, c) arrays into bands of exactly `rows` rows (the last may be
+    shorter).  Holds at most one band plus one chunk."""
+    pending: list[np.ndarray] = []
+    have = 0
+    for chunk in chunks:
+        if chunk.shape[0] == 0:
+            continue
+        if not pending and chunk.shape[0] == rows:
+            yield np.ascontiguousarray(chunk)
+            continue
+        pending.append(chunk)
+        have += chunk.shape[0]
+        while have >= rows:
+            band = np.concatenate(pending, axis=0) if len(pending) > 1 else pending[0]
+            yield np.ascontiguousarray(band[:rows])
+            rest = band[rows:]
+            pending = [rest] if rest.shape[0] else []
+            have = rest.shape[0]
+    if have:
+        yield np.ascontiguousarray(np.concatenate(pending, axis=0) if len(pending) > 1 else pending[0])
+
+
 class _StripReader:
     """Plain strip TIFFs (the common print-shop file: uncompressed, LZW, deflate or PackBits, 8 or 16-bit
     grey, RGB or CMYK, no alpha, top-left orientation) read strip by strip with tifffile.
@@ -943,7 +966,8 @@ class _StripReader:
             page = tf.pages.first if hasattr(tf.pages, "first") else tf.pages[0]
             fh, n = tf.filehandle, len(page.dataoffsets)
             w, c, h = self.hdr.width, self.plan.colour, self.hdr.height
-            sample = np.dtype(np.uint16 if self.plan.depth == 16 else np.uint8).newbyteorder(tf.byteorder)
+            native = np.dtype(np.uint16 if self.plan.depth == 16 else np.uint8)
+            sample = native.newbyteorder(tf.byteorder)
             row_bytes = w * c * sample.itemsize
             rows_done = 0
             for i, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts)):
@@ -962,7 +986,7 @@ class _StripReader:
                         data = fh.read(k * row_bytes)
                         if len(data) != k * row_bytes:
                             raise ImageError(self.path, f"truncated TIFF: strip {i + 1} of {n} is cut short")
-                        yield np.frombuffer(data, sample).reshape(k, w, c)
+                        yield np.frombuffer(data, sample).reshape(k, w, c).astype(native)
                     rows_done += rows_in
                     continue
                 data = fh.read(count)
@@ -977,30 +1001,14 @@ class _StripReader:
                 if strip is None or strip.ndim != 4 or strip.shape[2:] != (w, c):
                     raise ImageError(self.path, f"corrupt TIFF data: strip {i + 1} of {n} has the "
                                                 f"wrong size")
-                strip = strip[0, :h - rows_done]
+                strip = strip[0, :h - rows_done].astype(native, copy=False)
                 rows_done += strip.shape[0]
                 yield strip
             if rows_done < h:
                 raise ImageError(self.path, f"truncated TIFF: {rows_done} of {h} rows in the strips")
 
     def bands(self, rows: int) -> Iterator[np.ndarray]:
-        dtype = np.uint16 if self.plan.depth == 16 else np.uint8
-        w, c, h = self.hdr.width, self.plan.colour, self.hdr.height
-        y = 0                                  # image rows yielded
-        band = np.empty((min(rows, h), w, c), dtype)
-        filled = 0
-        for strip in self._strips():
-            while strip.shape[0]:
-                take = min(strip.shape[0], band.shape[0] - filled)
-                band[filled:filled + take] = strip[:take]
-                strip, filled = strip[take:], filled + take
-                if filled == band.shape[0]:
-                    yield band
-                    y += filled
-                    if y >= h:
-                        return
-                    band = np.empty((min(rows, h - y), w, c), dtype)
-                    filled = 0
+        return _reband(self._strips(), rows)
 
 
 FETCH_BYTES = 512 << 10    # bytes per libvips fetch, at most

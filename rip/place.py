@@ -36,7 +36,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .load import ImageError, ImageSource, fetch_rows
+from .load import ImageError, ImageSource, _reband, fetch_rows  # noqa: F401 (_reband: document, layout)
 # the Placement settings object is declared with the settings schema (rip/settings.py)
 from .settings import (DEFAULT_PPI, FILTERS, MAX_SIDE, MM_PER_INCH, ROTATIONS,  # noqa: F401
                        Placement)
@@ -51,29 +51,6 @@ DISK_RESERVE = 64 << 20
 
 # --------------------------------------------------------------------------------------
 # helpers
-
-
-def _reband(chunks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
-    """Re-cut a stream of (h_i, w, c) arrays into bands of exactly `rows` rows (the last may be
-    shorter).  Holds at most one band plus one chunk."""
-    pending: list[np.ndarray] = []
-    have = 0
-    for chunk in chunks:
-        if chunk.shape[0] == 0:
-            continue
-        if not pending and chunk.shape[0] == rows:
-            yield np.ascontiguousarray(chunk)
-            continue
-        pending.append(chunk)
-        have += chunk.shape[0]
-        while have >= rows:
-            band = np.concatenate(pending, axis=0) if len(pending) > 1 else pending[0]
-            yield np.ascontiguousarray(band[:rows])
-            rest = band[rows:]
-            pending = [rest] if rest.shape[0] else []
-            have = rest.shape[0]
-    if have:
-        yield np.ascontiguousarray(np.concatenate(pending, axis=0) if len(pending) > 1 else pending[0])
 
 
 def _need_disk(path: str, directory: str, nbytes: int, what: str) -> None:
