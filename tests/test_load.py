@@ -716,8 +716,8 @@ def test_strip_tiff_with_a_damaged_deflate_strip_fails_naming_the_strip(tmp_path
 
 
 def test_strip_tiff_band_memory_does_not_grow_with_the_strips_read(tmp_path):
-    """One strip and one band are held: the bands of a tall file are all fresh arrays of
-    the band's size, and reading is not a whole-image decode."""
+    """About one strip and one band are held: the bands of a tall file come in the band's
+    size, and reading is not a whole-image decode."""
     h, w = 2000, 300
     a = np.random.default_rng(2).integers(0, 256, (h, w, 3), dtype=np.uint8)
     path = tmp_path / "tall.tif"
