@@ -14,16 +14,22 @@ IPP_SRC := app/ipp/wideprint-ipp.c
 # unpacked, not installed - the test runs its own daemon in private namespaces and the
 # machine gets no mDNS service of its own (docs/ipp.md "DNS-SD")
 AVAHI  := build/avahi/.unpacked
+AOT    := build/aot.stamp
 
-.PHONY: demo test install bench clean bytecode
+.PHONY: demo test install bench clean bytecode kernels
 
 $(STAMP): setup.cfg pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test,gui]'
-	# compile the numba kernels now, so the first print after set-up is as quick as any
-	$(BIN)/python -m wideprint.app.warmup
 	touch $(STAMP)
+
+# the numba kernels compiled ahead of time into rip/_aot*.so and device_sim/_aot*.so, so no
+# command imports numba or waits for its cache (app/aot.py, docs/rip.md "Compiled kernels");
+# built again whenever a source of those packages changes (until then they run on numba's JIT)
+$(AOT): $(STAMP) $(wildcard rip/*.py device_sim/*.py)
+	$(BIN)/python -m wideprint.app.aot
+	@mkdir -p build && touch $@
 
 $(IPP_BIN): $(IPP_SRC)
 	@pkg-config --exists pappl || { echo "make: $(IPP_BIN) needs PAPPL: apt-get install libpappl-dev pkg-config (resources/debian-packages.txt; .ci/run installs them)" >&2; exit 1; }
@@ -40,8 +46,10 @@ $(AVAHI):
 # wideprint's own modules byte-compiled: an editable install leaves them as sources, and where
 # PYTHONDONTWRITEBYTECODE is set (CI, containers) every command would compile them again at
 # start-up (~0.2 s of each `wideprint print`); compileall skips what is up to date
-bytecode: $(STAMP)
+bytecode: $(STAMP) $(AOT)
 	$(BIN)/python -m compileall -q app driver device_sim rip __init__.py >/dev/null
+
+kernels: $(AOT)
 
 install: $(STAMP) $(IPP_BIN) bytecode
 
@@ -57,8 +65,8 @@ demo: $(STAMP) bytecode
 test: $(STAMP) $(IPP_BIN) $(AVAHI) bytecode
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
-bench: $(STAMP) bytecode
+bench: $(STAMP) $(AOT) bytecode
 	$(BIN)/python bench/run.py
 
 clean:
-	rm -rf $(OUT) .pytest_cache $(IPP_BIN)
+	rm -rf $(OUT) .pytest_cache $(IPP_BIN) $(AOT) rip/_aot.* device_sim/_aot.*

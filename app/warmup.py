@@ -1,8 +1,9 @@
-"""Compile the numba kernels ahead of the first job (`make install` runs it).
+"""Run every kernel once on numba's JIT, filling its on-disk cache (app/aot.py runs it
+before compiling the kernels ahead of time; docs/rip.md "Compiled kernels").
 
-The kernels are `@njit(cache=True)`: compiled once, then loaded from the cache beside
-their modules.  Without this, the first `wideprint print` after set-up spends seconds
-compiling before its first stroke; after it, the first print starts as fast as any.
+A kernel the ahead-of-time build does not cover runs on numba's JIT (`cache=True`: compiled
+once, then loaded from the cache beside its module); after this, even then the first print
+starts without compiling.
 Every kernel is reached by ripping and printing a small generated image on the in-process
 emulator with every halftone method, pass count and pass mask, 8 and 16 bits, RGB and CMYK.
 

@@ -12,7 +12,7 @@ import ctypes
 import sys
 
 import numpy as np
-from numba import njit
+from ..rip.compiled import kernel
 
 from ..rip.planes import PlanesWriter
 
@@ -23,7 +23,7 @@ from ..rip.planes import PlanesWriter
 _INK_SHIFT = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dcols, ink_shift):
     """Scatter the drops of packed fire words: bit z of fire f lands at
     (nozzle_rows[z], cols[f] + nozzle_dcols[z]), in the ink `ink_shift` selects of the

@@ -16,7 +16,7 @@ import math
 import cv2
 import numpy as np
 import tifffile
-from numba import njit
+from ..rip.compiled import kernel
 
 from .faults import Faults
 from .physical import JobGeometry
@@ -31,7 +31,7 @@ INK_RATIO = np.array([[0.10, 0.55, 0.85],                       # C: a solid's r
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)           # Rec. 709
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _splat(acc, base, channel, px, py):
     """Add one unit of ink per drop at (px, py) (pixel coordinates, pixel centres on
     integers) with bilinear weights; returns the drops that fell on rows already rendered."""
@@ -57,7 +57,7 @@ def _splat(acc, base, channel, px, py):
     return late
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _shade(ink, white, ratio, out):
     """Ink amounts (rows, width, 4) -> linear reflectance (rows, width, 3): coverage
     min(1, amount) of each ink multiplies the paper white (docs/physical.md)."""
@@ -94,7 +94,7 @@ LUT_SIZE = 1 << 16
 _SRGB_LUT = srgb_encode(np.arange(LUT_SIZE) / (LUT_SIZE - 1)).astype(np.float32)
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _encode(linear, noise, lut, out):
     """8-bit sRGB of linear reflectance (a 65,536-entry table: within 0.05 levels of
     srgb_encode) plus noise, rounded and clipped; all arrays flat."""

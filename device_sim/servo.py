@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
+from ..rip.compiled import kernel
 
 from .motion import Trapezoid
 
@@ -262,7 +262,7 @@ def _discrete_design(ke, kt, r, l, j, cpr, ti, T) -> tuple[float, float]:
 
 
 # -- the kernel ------------------------------------------------------------------------------
-@njit(cache=True)
+@kernel()
 def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kdw, m, vmax, ke, kt, r, l, j, tf, ilim, cpr,
                   out_x, out_v, out_i, out_u):
     """Run len(ff) controller periods of n_sub plant steps each.  ff[k] is the feed-forward
@@ -353,7 +353,7 @@ def _servo_kernel(ff, xref, n_sub, dt, x0, kp, ki, kdw, m, vmax, ke, kt, r, l, j
 
 
 # -- reference ---------------------------------------------------------------------------------
-@njit(cache=True, nogil=True)
+@kernel()
 def _trapezoid_kernel(t, start, s, distance, vp, a, tr, T, d_ramp, x, v, acc):  # pragma: no cover - compiled
     """One pass of the trapezoid's three phases; the same operations in the same order as
     numpy's would be (bit for bit: the servo's reference and the fire times depend on it)."""

@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from ..rip.compiled import kernel
 
 DDA_CLOCK_HZ = 50_000_000
 DDA_STATES = 6                       # clocks per DDA iteration
@@ -80,7 +80,7 @@ class CamMov:
 
 
 # -- the DDA kernel ------------------------------------------------------------------------------
-@njit(cache=True)
+@kernel()
 def _dda_kernel(dist, v0, v1, acc, bits, max_iter, rise, fall, v_rise, seg_of, seg_start,
                 v1_it, done_it):
     """Iterate the cam module over the queued segments.  Iteration n (1-based) ends at clock

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .parallel import run_parallel, split
-from numba import njit
+from .compiled import kernel
 
 __all__ = ["Separator", "INTENTS", "ink_limit_level"]
 
@@ -50,7 +50,7 @@ CURVE_ONE = 16
 ROUND16 = np.array([0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15], np.int64)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _limit_curves(c, m, y, k, limit, curves, use_curves, p):
     if limit >= 0:
         s = c + m + y + k
@@ -127,7 +127,7 @@ ROUND4 = np.uint64(1 << (WEIGHT_BITS + 1)) * np.uint64(0x0001000100010001)  # ha
 NO_LIMIT = 1 << 30    # a limit no pixel reaches (C+M+Y+K <= 1020)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _tetra(r, g, b, lut, axes, nv, d12, s3):
     """C, M, Y, K of one RGB pixel through the 3-D LUT, tetrahedral interpolation, as
     (packed, total): packed = C | M << 8 | Y << 16 | K << 24 (the bytes C, M, Y, K in
@@ -165,7 +165,7 @@ def _tetra(r, g, b, lut, axes, nv, d12, s3):
     return np.uint32(x | (x >> np.uint64(16))), total
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _lut3_rows(src, lut, axes, d12, s3, limit, out):
     """src (n, 3) uint8/uint16 -> out (n,) uint32 packed CMYK through the 3-D LUT, before
     ink limit and curves; returns whether any pixel is over `limit` (< 0: none).  Kept free
@@ -183,7 +183,7 @@ def _lut3_rows(src, lut, axes, d12, s3, limit, out):
     return over
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _post_rows(out, limit, curves, use_curves):
     """Ink limit and curves in place on (n, 4) uint8 CMYK; pixels under the limit with no
     curves are only read."""
@@ -203,7 +203,7 @@ def _post_rows(out, limit, curves, use_curves):
 SEP_BLOCK = 4096      # pixels per separation block: its CMYK stays in L1 for the post step
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _sep3(src, lut, axes, d12, s3, limit, curves, use_curves, out, out32):
     """src (n, 3) uint8/uint16 -> out (n, 4) uint8 (out32: the same memory as (n,) uint32):
     3-D LUT, then ink limit and curves, block by block.  Within a level of LittleCMS
@@ -215,7 +215,7 @@ def _sep3(src, lut, axes, d12, s3, limit, curves, use_curves, out, out32):
             _post_rows(out[a:b], limit, curves, use_curves)
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _sep1(src, table, limit, curves, use_curves, out):
     """src (n,) grey -> out (n, 4) through a 1-D table (V, 4) uint8."""
     n = src.shape[0]
@@ -229,7 +229,7 @@ def _sep1(src, table, limit, curves, use_curves, out):
         out[p, 3] = k
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _cmyk_post(src, scale, limit, curves, use_curves, out):
     """src (n, 4) CMYK uint8/uint16 -> out (n, 4) uint8: per-channel scale table, ink limit, curves."""
     n = src.shape[0]

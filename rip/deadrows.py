@@ -18,12 +18,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import numpy as np
-from numba import njit
+from .compiled import kernel
 
 from .profile import ProfileError
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _give_away(rows: np.ndarray, dead: np.ndarray, first: int, period: int, c: int) -> None:
     """rows (h, W, 4) 0/1 in place; rows[i] is image row first + i; for every row i with
     (first + i) mod period in `dead` and both neighbours inside, its colour c dots move to

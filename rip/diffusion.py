@@ -59,7 +59,7 @@ at ink 0 and 255 and the clamp keeps ``|acc| <= 127 UNIT``, so ink 0 never gets 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .compiled import kernel
 
 __all__ = ["OSTROMOUKHOV", "ZHOU_FANG_KEYS", "ZHOU_FANG_STRENGTH", "TUNED_STRENGTH", "UNIT",
            "WEIGHT_BITS", "MODULATION", "NEXT_BOOST", "VCDiffuser", "coefficient_table",
@@ -225,7 +225,7 @@ PAIR_LIMIT = 254 * UNIT     # error clamp of the colour-aware pairs
 SPLIT_BOOST = 1.5
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _vc_plane(src, dst, c, err, row0, wn, wdl, mod, noise, ox, oy):  # pragma: no cover - compiled
     rows, width = src.shape[0], src.shape[1]
     nm = noise.shape[0] - 1
@@ -273,14 +273,14 @@ def _vc_plane(src, dst, c, err, row0, wn, wdl, mod, noise, ox, oy):  # pragma: n
         cur[:] = 0
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def vc_planes(src, dst, err, row0, c0, c1, wn, wdl, mod, noise, offs):  # pragma: no cover
     """Independent planes c0..c1-1."""
     for c in range(c0, c1):
         _vc_plane(src, dst, c, err[c], row0, wn, wdl, mod, noise, offs[c, 0], offs[c, 1])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _pair_decide(la, lb, va, vb, ta, tb, t, split):
     """The joint decision for one pixel of a pair: (dot a, dot b).  va, vb the values
     (ink + error), ta, tb their own (modulated) thresholds, la, lb the input inks, t the
@@ -316,7 +316,7 @@ def _pair_decide(la, lb, va, vb, ta, tb, t, split):
     return oa, ob
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa, oya, oxb, oyb, lim):  # pragma: no cover
     rows, width = src.shape[0], src.shape[1]
     ch = np.uint64(src.shape[2])
@@ -398,7 +398,7 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa,
         curb[:] = 0
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _step(lvl, a, nz, tab):
     """One pixel of one ink: (dot, next-pixel share, down-behind share, down share)."""
     v = np.int64(lvl) * _U + min(max(a, -_LIM), _LIM)
@@ -410,7 +410,7 @@ def _step(lvl, a, nz, tab):
     return dot, en, edl, v - en - edl
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):  # pragma: no cover
     """Two inks diffused independently in one loop (their dependency chains overlap); the
     same arithmetic as ``_vc_plane``, one explicit loop per direction.  src/dst must be
@@ -464,7 +464,7 @@ def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):
         curb[:] = 0
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def vc_twos(src, dst, err, row0, pairs, p0, p1, tab, noise, offs):  # pragma: no cover
     """Pairs p0..p1-1 of ``pairs``, each two independent inks in one loop."""
     for k in range(p0, p1):
@@ -474,7 +474,7 @@ def vc_twos(src, dst, err, row0, pairs, p0, p1, tab, noise, offs):  # pragma: no
                 offs[ca, 0], offs[ca, 1], offs[cb, 0], offs[cb, 1])
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def vc_pairs(src, dst, err, row0, pairs, p0, p1, wn, wdl, mod, smod, noise, offs, lim):  # pragma: no cover
     """Pairs p0..p1-1 of ``pairs`` ((k, 2) int64 channel indices), each decided jointly (the
     colour-aware decision; independent inks go through ``vc_twos``)."""

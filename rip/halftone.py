@@ -89,7 +89,7 @@ and 1 are complementary.  With ``seed != 0`` the offsets are drawn from
 ``numpy.random.default_rng(seed).integers(0, n, size=(channels, 2))`` as
 ``(ox_k, oy_k)`` rows.
 
-Speed: the kernels are numba ``@njit(cache=True, nogil=True)``, no Python
+Speed: the kernels are numba functions (rip/compiled.py: compiled at install, nogil), no Python
 per pixel.  Work is split over a small shared ``ThreadPoolExecutor`` (2
 workers, the machine has 2 cores): error diffusion gives each worker a group
 of planes (one kernel call loops over its planes; ``vced`` diffuses two planes
@@ -111,7 +111,7 @@ from pathlib import Path
 
 import numpy as np
 
-from numba import njit
+from .compiled import kernel
 
 from .parallel import WORKERS, run_parallel
 
@@ -147,7 +147,7 @@ _MIN_PARALLEL_PIXELS = 1 << 16
 # numba kernels
 # --------------------------------------------------------------------------
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
     """Floyd-Steinberg, serpentine, integer.  src/dst: (rows, width) uint8 views,
     err: (2, width + 4) int32 ring of error rows (units of 1/16 level) indexed by
@@ -194,7 +194,7 @@ def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
         cur[:] = 0
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _fs_planes(src, dst, err, row0, c0, c1):  # pragma: no cover - compiled
     """Planes c0..c1-1 of (rows, width, channels) src/dst; err (channels, 2, width + 4)."""
     for c in range(c0, c1):
@@ -224,8 +224,8 @@ def _make_ed5x3(D, row0, row1, row2):
     thr = 128 * D
     full = 255 * D
 
-    @njit(cache=True, nogil=True)
-    def kernel(src3, dst3, err3, row0, cfirst, cend):  # pragma: no cover - compiled
+    @kernel(variant=f"{D}:{row0}:{row1}:{row2}")
+    def ed5x3(src3, dst3, err3, row0, cfirst, cend):  # pragma: no cover - compiled
         rows, width = src3.shape[0], src3.shape[1]
         for c in range(cfirst, cend):
             src = src3[:, :, c]
@@ -284,13 +284,13 @@ def _make_ed5x3(D, row0, row1, row2):
                         n2[p - 2] += w2e * e
                 cur[:] = 0
 
-    return kernel
+    return ed5x3
 
 
 _ED5X3_PLANES = {name: _make_ed5x3(*k) for name, k in _KERNELS_5X3.items()}
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _ordered_rows(src, dst, thr, row0):  # pragma: no cover - compiled
     """Ordered dither.  src/dst: (rows, width * channels) C-contiguous uint8;
     thr: (n, n * channels) uint8 thresholds, channel-interleaved, per-channel

@@ -33,6 +33,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .compiled import kernel
+
 __all__ = ["ImageError", "ImageSource", "open_image"]
 
 #: largest RLE-compressed BMP we decode (the index plane is held in memory: 1 byte / px)
@@ -520,92 +522,76 @@ def _mask_shift_bits(m: int) -> tuple[int, int]:
     return shift, bits
 
 
-def _numba():
-    import numba
-
-    return numba
-
-
-_RLE_DECODER = None
-
-
-def _rle_decoder():
-    global _RLE_DECODER
-    if _RLE_DECODER is None:
-        nb = _numba()
-
-        @nb.njit(cache=True, nogil=True)
-        def decode(data, width, padded, height, rle4, colors, out, where):
-            """RLE8/RLE4 into ``out`` (height, width) uint8, rows in file order (bottom-up).
-            A run may cover the row's padding (`padded` pixels: encoders such as ImageMagick
-            encode it), never more.  Returns 0 ok, 1 data ends early, 2 bad delta / position
-            outside the image, 3 a run overruns its row, 4 a colour index past the palette;
-            `where` gets (byte of the code in `data`, x, y, count or index) of the problem."""
-            n = data.shape[0]
+@kernel()
+def _rle_decode(data, width, padded, height, rle4, colors, out, where):
+    """RLE8/RLE4 into ``out`` (height, width) uint8, rows in file order (bottom-up).
+    A run may cover the row's padding (`padded` pixels: encoders such as ImageMagick
+    encode it), never more.  Returns 0 ok, 1 data ends early, 2 bad delta / position
+    outside the image, 3 a run overruns its row, 4 a colour index past the palette;
+    `where` gets (byte of the code in `data`, x, y, count or index) of the problem."""
+    n = data.shape[0]
+    x = 0
+    y = 0
+    i = 0
+    while True:
+        if y >= height:
+            return 0
+        if i + 1 >= n:
+            where[0], where[1], where[2], where[3] = i, x, y, 0
+            return 1
+        count = data[i]
+        val = data[i + 1]
+        at = i
+        i += 2
+        if count > 0:  # encoded run
+            where[0], where[1], where[2], where[3] = at, x, y, count
+            if x + count > padded:
+                return 3
+            for t in range(count):
+                v = ((val >> 4) if (t & 1) == 0 else (val & 15)) if rle4 else val
+                if x < width:               # not the padding
+                    if v >= colors:
+                        where[1], where[3] = x, v
+                        return 4
+                    out[y, x] = v
+                x += 1
+        elif val == 0:  # end of line
             x = 0
-            y = 0
-            i = 0
-            while True:
-                if y >= height:
-                    return 0
-                if i + 1 >= n:
-                    where[0], where[1], where[2], where[3] = i, x, y, 0
-                    return 1
-                count = data[i]
-                val = data[i + 1]
-                at = i
-                i += 2
-                if count > 0:  # encoded run
-                    where[0], where[1], where[2], where[3] = at, x, y, count
-                    if x + count > padded:
-                        return 3
-                    for t in range(count):
-                        v = ((val >> 4) if (t & 1) == 0 else (val & 15)) if rle4 else val
-                        if x < width:               # not the padding
-                            if v >= colors:
-                                where[1], where[3] = x, v
-                                return 4
-                            out[y, x] = v
-                        x += 1
-                elif val == 0:  # end of line
-                    x = 0
-                    y += 1
-                elif val == 1:  # end of bitmap
-                    return 0
-                elif val == 2:  # delta
-                    if i + 1 >= n:
-                        where[0], where[1], where[2], where[3] = at, x, y, 0
-                        return 1
-                    x += data[i]
-                    y += data[i + 1]
-                    i += 2
-                    if x > padded or y > height or (y == height and x > 0):
-                        where[0], where[1], where[2], where[3] = at, x, y, 0
-                        return 2
-                else:  # absolute run of `val` pixels
-                    cnt = val
-                    nbytes = (cnt + 1) // 2 if rle4 else cnt
-                    where[0], where[1], where[2], where[3] = at, x, y, cnt
-                    if i + nbytes > n:
-                        return 1
-                    if x + cnt > padded:
-                        return 3
-                    for t in range(cnt):
-                        if rle4:
-                            b = data[i + (t >> 1)]
-                            v = (b >> 4) if (t & 1) == 0 else (b & 15)
-                        else:
-                            v = data[i + t]
-                        if x < width:               # not the padding
-                            if v >= colors:
-                                where[0], where[1], where[3] = i + ((t >> 1) if rle4 else t), x, v
-                                return 4
-                            out[y, x] = v
-                        x += 1
-                    i += nbytes + (nbytes & 1)  # padded to 16 bits
+            y += 1
+        elif val == 1:  # end of bitmap
+            return 0
+        elif val == 2:  # delta
+            if i + 1 >= n:
+                where[0], where[1], where[2], where[3] = at, x, y, 0
+                return 1
+            x += data[i]
+            y += data[i + 1]
+            i += 2
+            if x > padded or y > height or (y == height and x > 0):
+                where[0], where[1], where[2], where[3] = at, x, y, 0
+                return 2
+        else:  # absolute run of `val` pixels
+            cnt = val
+            nbytes = (cnt + 1) // 2 if rle4 else cnt
+            where[0], where[1], where[2], where[3] = at, x, y, cnt
+            if i + nbytes > n:
+                return 1
+            if x + cnt > padded:
+                return 3
+            for t in range(cnt):
+                if rle4:
+                    b = data[i + (t >> 1)]
+                    v = (b >> 4) if (t & 1) == 0 else (b & 15)
+                else:
+                    v = data[i + t]
+                if x < width:               # not the padding
+                    if v >= colors:
+                        where[0], where[1], where[3] = i + ((t >> 1) if rle4 else t), x, v
+                        return 4
+                    out[y, x] = v
+                x += 1
+            i += nbytes + (nbytes & 1)  # padded to 16 bits
 
-        _RLE_DECODER = decode
-    return _RLE_DECODER
 
 
 class _BmpReader:
@@ -622,7 +608,7 @@ class _BmpReader:
         plane = np.zeros((info.height, info.width), np.uint8)
         where = np.zeros(4, np.int64)
         padded = info.stride * 8 // info.bpp          # pixels in a row with its padding
-        status = _rle_decoder()(data, info.width, padded, info.height, info.compression == 2, info.colors,
+        status = _rle_decode(data, info.width, padded, info.height, info.compression == 2, info.colors,
                                 plane, where)
         at, x, y, val = (int(v) for v in where)
         at += info.offset                  # a byte offset in the file

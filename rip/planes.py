@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
+from .compiled import kernel
+
 TILE = (64, 1024)          # the 8-bit encoding's tiles
 STRIP_ROWS = 64            # the packed encoding's strips
 FORMATS = ("8bit", "packed")
@@ -408,28 +410,18 @@ def _resolution(page, tag: str, default: float) -> float:
         return default
 
 
+@kernel()
 def _box_sums(band, y0, by, bx, lut, sums):
     """Add the ink colour of every dot of `band` (rows from y0) into its by x bx box."""
-    from numba import njit                 # compiled once, cached; here, so the seam loads light
-
-    global _box_sums_kernel
-    if _box_sums_kernel is None:
-        @njit(cache=True, nogil=True)
-        def kernel(band, y0, by, bx, lut, sums):
-            for r in range(band.shape[0]):
-                yy = (y0 + r) // by
-                for c in range(band.shape[1]):
-                    i = (band[r, c, 0] > 0) | (band[r, c, 1] > 0) << 1 | \
-                        (band[r, c, 2] > 0) << 2 | (band[r, c, 3] > 0) << 3
-                    xx = c // bx
-                    sums[yy, xx, 0] += lut[i, 0]
-                    sums[yy, xx, 1] += lut[i, 1]
-                    sums[yy, xx, 2] += lut[i, 2]
-        _box_sums_kernel = kernel
-    _box_sums_kernel(band, y0, by, bx, lut, sums)
-
-
-_box_sums_kernel = None
+    for r in range(band.shape[0]):
+        yy = (y0 + r) // by
+        for c in range(band.shape[1]):
+            i = (band[r, c, 0] > 0) | (band[r, c, 1] > 0) << 1 | \
+                (band[r, c, 2] > 0) << 2 | (band[r, c, 3] > 0) << 3
+            xx = c // bx
+            sums[yy, xx, 0] += lut[i, 0]
+            sums[yy, xx, 1] += lut[i, 1]
+            sums[yy, xx, 2] += lut[i, 2]
 
 
 def _ink_lut() -> np.ndarray:

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 from typing import Iterator
 
 import numpy as np
-from numba import njit
+from .compiled import kernel
 
 from .load import ImageError
 from .settings import MAX_SIDE
@@ -80,7 +80,7 @@ DEFAULT = _Config("bits", SIMPLE_COLOURS[1][0], SIMPLE_COLOURS[1][1])
 OK, TRUNCATED, TOO_LONG, ODD_RLE = 0, 1, 2, 3
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _fill(dst, o, cnt, v) -> bool:
     """A run of `cnt` bytes `v` into dst from `o`; False if it passes the row's end with a
     non-zero byte (a zero run past the width is padding)."""
@@ -95,7 +95,7 @@ def _fill(dst, o, cnt, v) -> bool:
     return True
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _literal(src, i, cnt, dst, o) -> int:
     """Copy src[i:i+cnt] into dst from `o`; the index in src of a non-zero byte past the
     row's end, or -1."""
@@ -109,7 +109,7 @@ def _literal(src, i, cnt, dst, o) -> int:
     return -1
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _decode_row(mode, src, dst):
     """Decode one row `src` in compression `mode` (0, 1, 2, 3) into `dst` (one plane row of the
     source width).  Modes 0-2 overwrite dst and zero-fill what the row does not reach; mode 3

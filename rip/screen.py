@@ -13,7 +13,7 @@ docs/rip.md has the measurements.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .compiled import kernel
 
 from .color import Separator, _lut3_rows, _post_rows
 from .halftone import ORDERED, Halftoner
@@ -22,7 +22,7 @@ from .parallel import run_parallel, split
 __all__ = ["OrderedScreen"]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _drops4(ink, thr):
     """Bit 7 of each byte lane set where the ink byte > the threshold byte (unsigned):
     four inks compared at once (SWAR; H. Warren, Hacker's Delight, 2nd ed., 6-1)."""
@@ -32,7 +32,7 @@ def _drops4(ink, thr):
     return ~ge & h
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _screen_row(cmyk, thr_row, x_start, out):
     """One row (or a piece of one starting at column x_start, a multiple of 8): cmyk (w,)
     uint32 packed inks (C in the low byte), thr_row (n,) uint32 thresholds packed the same
@@ -53,7 +53,7 @@ def _screen_row(cmyk, thr_row, x_start, out):
         out[3, xb] = acc >> 24
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _screen_cmyk(cmyk, thr, row0, out):
     """cmyk (h, w) uint32 packed (ink limit and curves applied) -> out (h, 4, wb) bits."""
     n = thr.shape[0]
@@ -64,7 +64,7 @@ def _screen_cmyk(cmyk, thr, row0, out):
 SCREEN_CHUNK = 512     # pixels per step: the chunk's source, CMYK and bits stay in L1 with the LUT
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _screen_lut3(src, lut, axes, d12, s3, limit, curves, use_curves, thr, row0, out):
     """src (h, w, 3) RGB -> out (h, 4, wb) bits: separation, ink limit, curves and the
     threshold compare, SCREEN_CHUNK pixels at a time through a small scratch buffer (a

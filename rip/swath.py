@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .compiled import kernel
 
 from .parallel import run_parallel, split
 from .profile import COLORS, Profile, ProfileError
@@ -317,7 +317,7 @@ def unpack_dots(bits: np.ndarray, width: int) -> np.ndarray:
     return np.ascontiguousarray(dots.transpose(0, 2, 1))
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _pack_bits(band, out):
     """(rows, width, 4) dots -> (rows, 4, width/8) bits, x = 0 in bit 7 of byte 0."""
     rows, width = band.shape[0], band.shape[1]
@@ -334,7 +334,7 @@ def _pack_bits(band, out):
                 o[xb] = v
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi):
     """The image row nozzle z of head h prints in this stroke, or -1 (a nozzle outside the
     usable run, dead-end or dead, or a row outside [lo, hi))."""
@@ -349,7 +349,7 @@ def _nozzle_row(h, z, ch, head_y, hpc, s0, n, advance, slot_table, top, lo, hi):
     return r
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _transpose8(x):
     """8x8 bit matrix in a uint64, byte k bit i -> byte i bit k (H. Warren, Hacker's
     Delight, 2nd ed., 7-3)."""
@@ -361,7 +361,7 @@ def _transpose8(x):
     return x ^ t ^ (t << np.uint64(28))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@kernel(inline="always")
 def _popcount(x):
     x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
     x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
@@ -369,7 +369,7 @@ def _popcount(x):
     return np.int64((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _pack_stroke_blocks(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, mask_rows,
                         mask_index, slot_table, head_channel, head_y, head_col, hpc, spread_lo,
                         h0, h1, words8, dots, span):
@@ -453,7 +453,7 @@ def _pack_stroke_blocks(buf, width, base, lo, hi, top, i_stroke, advance, n, s0,
         dots[ch] += count
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _pack_stroke(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, qmask, sel,
                  slot_table, head_channel, head_y, head_col, hpc, spread_lo, h0, h1, words,
                  dots, span):

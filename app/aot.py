@@ -1,0 +1,135 @@
+"""Build the compiled kernels (`make` runs it; docs/rip.md, "Compiled kernels").
+
+    python -m wideprint.app.aot [--jobs N]
+
+1. With numba's JIT (WIDEPRINT_KERNELS=jit), rip and print small generated jobs through
+   every path that has a kernel (app/warmup.py: every halftone method, pass count and pass
+   mask, 8/16 bits, RGB/CMYK; here also grey, the preview, the scanner model, dead-nozzle
+   compensation, RTL rows and RLE BMPs): numba's on-disk cache is filled, and each kernel
+   called from Python has the signatures it is called with.
+2. Compile those signatures with numba's pycc into one extension module per package
+   (rip/_aot*.so, device_sim/_aot*.so), for this machine's CPU, with the GIL released, and
+   write the manifest beside it: the digest of the package's sources it was built from and,
+   per kernel, which exported function takes which argument types (rip/compiled.py reads
+   both and falls back to the JIT on anything else).
+
+pycc is the ahead-of-time compiler numba ships (pending deprecation in favour of a
+successor not released yet); it needs a C compiler and setuptools, both present wherever
+`make` builds the IPP printer application.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def exercise() -> None:
+    """Call every kernel the way the product calls it."""
+    import numpy as np
+    import tifffile
+
+    from . import api
+    from .warmup import warm
+    warm(verbose=False)
+    from ..rip import deadrows, load, planes, rtl  # noqa: F401  (their kernels)
+    rng = np.random.default_rng(0)
+    with tempfile.TemporaryDirectory(prefix="wideprint-aot-") as d:
+        grey = Path(d) / "grey.tif"
+        tifffile.imwrite(grey, rng.integers(0, 256, (40, 48), dtype=np.uint8))
+        rgb16 = Path(d) / "rgb16.tif"
+        tifffile.imwrite(rgb16, rng.integers(0, 65536, (40, 48, 3), dtype=np.uint16))
+        for path in (grey, rgb16):
+            for dither in ("fs", "bayer", "vced"):
+                media = Path(d) / "m.tif"
+                api.print_file(path, dither=dither, size="pixels", media_out=media)
+        planes.write_preview(media, Path(d) / "m.png")
+        api.predict_scan(grey, Path(d) / "scan.tif", size="pixels")
+        api.predict_scan(grey, Path(d) / "scan-grey.tif", size="pixels", grey=True)
+    # paths no small generated file reaches cheaply: called as their callers call them
+    for mode in (0, 1, 2, 3):
+        rtl._decode_row(mode, np.frombuffer(b"\x00\x00", np.uint8), np.zeros(8, np.uint8))
+    load._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 4, 1, False, 2,
+                     np.zeros((1, 4), np.uint8), np.zeros(4, np.int64))
+    load._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 8, 1, True, 2,
+                     np.zeros((1, 4), np.uint8), np.zeros(4, np.int64))
+    rows = np.zeros((16, 8, 4), np.uint8)
+    deadrows._give_away(rows, np.array([1], np.int64), 0, 4, 0)
+
+
+def arg_key(t) -> str | None:
+    """The rip/compiled.py key of the Python values numba types as `t` (None: a type the
+    compiled modules do not take; that signature stays with the JIT)."""
+    from numba.core import types
+    from numba.np.numpy_support import as_dtype
+    if isinstance(t, types.Array):
+        return (f"{as_dtype(t.dtype).str}{t.ndim}{t.layout}{'w' if t.mutable else 'r'}"
+                f"{'' if t.aligned else 'u'}")
+    if isinstance(t, types.Boolean):
+        return "bool"
+    if isinstance(t, (types.Integer, types.Float)):
+        return t.name
+    return None
+
+
+def build(verbose: bool = True) -> dict[str, int]:
+    import numba.pycc.compiler as pycc_compiler
+    from numba.pycc import CC
+
+    from ..rip.compiled import KERNELS, MANIFEST, MODULE, sources_digest
+
+    class _ReleaseGil(pycc_compiler.Flags):
+        """numba's `nogil=True` for the exported functions' wrappers (pycc has no option)."""
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.release_gil = True
+
+    pycc_compiler.Flags = _ReleaseGil
+
+    os.environ["WIDEPRINT_KERNELS"] = "jit"        # the exercise runs, and types, on the JIT
+    t0 = time.monotonic()
+    exercise()
+    t1 = time.monotonic()
+    by_package: dict[str, list] = {}
+    for k in KERNELS.values():
+        if k.called and k._dispatcher is not None:
+            by_package.setdefault(k.package, []).append(k)
+    counts = {}
+    for package, kernels in sorted(by_package.items()):
+        pkg_dir = Path(sys.modules[package].__file__).parent
+        cc = CC(MODULE)
+        cc.output_dir = str(pkg_dir)
+        cc.target_cpu = "host"
+        manifest = {"sources": sources_digest(pkg_dir), "kernels": {}}
+        n = 0
+        for k in kernels:
+            exports = manifest["kernels"].setdefault(k.name, [])
+            for sig in k._dispatcher.signatures:
+                keys = [arg_key(t) for t in sig]
+                if any(x is None for x in keys):
+                    print(f"aot: {k.name}{sig}: left to the JIT", file=sys.stderr)
+                    continue
+                export = f"k{n}"
+                cc.export(export, k._dispatcher.overloads[sig].signature)(k.py_func)
+                exports.append([export, keys])
+                n += 1
+        for old in pkg_dir.glob(f"{MODULE}.*.so"):
+            old.unlink()
+        (pkg_dir / MANIFEST).unlink(missing_ok=True)
+        cc.compile()
+        (pkg_dir / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+        counts[package] = n
+    if verbose:
+        print(f"wideprint: kernels run with numba's JIT in {t1 - t0:.0f} s, then "
+              + ", ".join(f"{n} signatures of {p}" for p, n in counts.items())
+              + f" compiled ahead of time in {time.monotonic() - t1:.0f} s")
+    return counts
+
+
+if __name__ == "__main__":
+    build()
+    sys.exit(0)
