@@ -6,7 +6,7 @@ passes, against the printer's real time.  Target: >= 20x real time on 2 cores.
 stroke, feed and carriage move at the machine's speeds; the report's `printer_s`).  Two
 figures a job:
 - `wideprint print IMG --device emulator --media-out M.tif`: a fresh process, start-up
-  (imports, numba's cache) included; wall seconds of the whole command;
+  (imports, the compiled kernels) included; wall seconds of the whole command;
 - `api.print_file(IMG, media_out=...)` in a warm process: the call alone (it also reads the
   media back, as an acceptance test does).
 

@@ -378,7 +378,7 @@ def whole_commands(d: str, tif: str, w: int, h: int, repeat: int) -> dict:
     res[("cli", "--help")] = (0, r)
     r, walls = best_run(wideprint_cmd("rip", small, "-o", out, "--dither", "fs"), repeat, env=env)
     print(fmt_row("wideprint", "rip -o 100 x 100 (fs)", 0, r,
-                  "start-up: imports, numba's cache, a tiny job"))
+                  "start-up: imports, a tiny job"))
     res[("cli", "small")] = (0, r)
     with contextlib.suppress(OSError):
         os.unlink(out)
