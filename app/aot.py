@@ -28,6 +28,11 @@ import time
 from pathlib import Path
 
 
+# a small EPS with a CMYK box (the document path: Ghostscript renders CMYK bands)
+_EPS = (b"%!PS-Adobe-3.0 EPSF-3.0\n%%BoundingBox: 0 0 36 24\n"
+        b"0.2 0.4 0.1 0.3 setcmykcolor 4 4 20 12 rectfill showpage\n%%EOF\n")
+
+
 def exercise() -> None:
     """Call every kernel the way the product calls it."""
     import numpy as np
@@ -39,15 +44,26 @@ def exercise() -> None:
     from ..rip import deadrows, load, planes, rtl  # noqa: F401  (their kernels)
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory(prefix="wideprint-aot-") as d:
-        grey = Path(d) / "grey.tif"
-        tifffile.imwrite(grey, rng.integers(0, 256, (40, 48), dtype=np.uint8))
-        rgb16 = Path(d) / "rgb16.tif"
-        tifffile.imwrite(rgb16, rng.integers(0, 65536, (40, 48, 3), dtype=np.uint16))
-        for path in (grey, rgb16):
+        images = []
+        for depth in (np.uint8, np.uint16):             # grey, RGB and CMYK in 8 and 16 bits
+            top = np.iinfo(depth).max + 1
+            for name, shape, extra in (("grey", (40, 48), {}), ("rgb", (40, 48, 3), {}),
+                                       ("cmyk", (40, 48, 4), {"photometric": "separated"})):
+                path = Path(d) / f"{name}{np.dtype(depth).itemsize * 8}.tif"
+                tifffile.imwrite(path, rng.integers(0, top, shape, dtype=depth), **extra)
+                images.append(path)
+        eps = Path(d) / "box.eps"
+        eps.write_bytes(_EPS)
+        media = Path(d) / "m.tif"
+        for path in images:
             for dither in ("fs", "bayer", "vced"):
-                media = Path(d) / "m.tif"
                 api.print_file(path, dither=dither, size="pixels", media_out=media)
+        for dither in ("fs", "bayer"):
+            r = api.print_file(eps, dither=dither, media_out=media)
+            if not r.ok:                # no Ghostscript here: that path stays with the JIT
+                print(f"aot: the EPS path not exercised ({r.message})", file=sys.stderr)
         planes.write_preview(media, Path(d) / "m.png")
+        grey = images[0]
         api.predict_scan(grey, Path(d) / "scan.tif", size="pixels")
         api.predict_scan(grey, Path(d) / "scan-grey.tif", size="pixels", grey=True)
     # paths no small generated file reaches cheaply: called as their callers call them

@@ -70,16 +70,16 @@ class Kernel:
     def __repr__(self) -> str:
         return f"<kernel {self.name}>"
 
-    def __call__(self, *args):
+    def __call__(self, *args, **kwargs):
         table = self._table
         if table is None:
             table = self._table = _compiled_table(self)
-        if table:
+        if table and not kwargs:
             f = table.get(tuple([_key(a) for a in args]))
             if f is not None:
                 return f(*args)
         self.called = True
-        return self.dispatcher(*args)
+        return self.dispatcher(*args, **kwargs)
 
     @property
     def dispatcher(self):

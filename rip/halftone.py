@@ -195,9 +195,63 @@ def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
 
 
 @kernel()
+def _fs_two(src3, dst3, err3, row0, c):  # pragma: no cover - compiled
+    """`_fs_plane` on planes c and c + 1 of (rows, width, channels) src3/dst3 in one loop,
+    err3 (channels, 2, width + 4): the same arithmetic for each plane, bit for bit, but the
+    two planes' error chains are independent, so the CPU overlaps them (one plane's loop is
+    bound by the latency of its carry): 1.25-1.3x the throughput of one plane after the
+    other (8,000 x 1,000 x 4 on one core: 0.112-0.130 -> 0.086-0.106 s)."""
+    rows, width = src3.shape[0], src3.shape[1]
+    lim = 127 * 16
+    ea = err3[c]
+    eb = err3[c + 1]
+    for i in range(rows):
+        r = row0 + i
+        cura, nxta = ea[r & 1], ea[(r + 1) & 1]
+        curb, nxtb = eb[r & 1], eb[(r + 1) & 1]
+        carrya = carryb = 0
+        s1a = s0a = s1b = s0b = 0
+        back = r & 1                     # serpentine: odd rows right to left
+        d = 1 - 2 * back                 # the scan's step; the row below gets shares at p - d
+        for k in range(width):
+            x = k + back * (width - 1 - 2 * k)
+            p = x + 2
+            a = min(max(cura[p] + carrya, -lim), lim)
+            b = min(max(curb[p] + carryb, -lim), lim)
+            v = np.int64(src3[i, x, c]) * 16 + a
+            w = np.int64(src3[i, x, c + 1]) * 16 + b
+            dot = ((v - 2048) >> 63) + 1     # 1 if v >= 128*16 else 0, branch-free
+            dotb = ((w - 2048) >> 63) + 1
+            dst3[i, x, c] = dot
+            dst3[i, x, c + 1] = dotb
+            v -= dot * 4080
+            w -= dotb * 4080
+            e = v >> 4
+            f = w >> 4
+            carrya = e * 7 + (v - (e << 4))
+            carryb = f * 7 + (w - (f << 4))
+            nxta[p - d] = s1a + 3 * e
+            nxtb[p - d] = s1b + 3 * f
+            s1a = s0a + 5 * e
+            s1b = s0b + 5 * f
+            s0a = e
+            s0b = f
+        end = width + 1 if d == 1 else 2
+        nxta[end] = s1a
+        nxtb[end] = s1b
+        cura[:] = 0
+        curb[:] = 0
+
+
+@kernel()
 def _fs_planes(src, dst, err, row0, c0, c1):  # pragma: no cover - compiled
-    """Planes c0..c1-1 of (rows, width, channels) src/dst; err (channels, 2, width + 4)."""
-    for c in range(c0, c1):
+    """Planes c0..c1-1 of (rows, width, channels) src/dst; err (channels, 2, width + 4):
+    two at a time where it can (`_fs_two`), the last odd one alone."""
+    c = c0
+    while c + 1 < c1:
+        _fs_two(src, dst, err, row0, c)
+        c += 2
+    if c < c1:
         _fs_plane(src[:, :, c], dst[:, :, c], err[c], row0)
 
 
