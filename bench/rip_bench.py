@@ -9,9 +9,9 @@ What is measured (1 image pixel = 1 device pixel, 1-bit CMYK out, each run in a 
 whose peak RSS is read from os.wait4's rusage):
 - wideprint: file -> swath words (RipJob(...).strokes(), every StrokeData.words made), 300 dpi,
   1 pass, dither fs and vced (error diffusion; the RGB input goes through the ICC separation), bayer
-  and bluenoise (ordered).  The numba cache is warmed first by a tiny job in a separate
-  process, and each timed process runs a tiny job of its own before the clock starts, so the
-  time is the RIP's, not the interpreter's start-up or a JIT compile (start-up is shown apart).
+  and bluenoise (ordered).  A tiny job runs first in a separate process (numba's cache, for a
+  kernel the compiled modules lack), and each timed process runs a tiny job of its own before
+  the clock starts, so the time is the RIP's, not the interpreter's start-up (shown apart).
 - Ghostscript: tiffscaled4 (error diffusion) and bitcmyk (ordered screen) on a PostScript
   wrapper of the raw RGB (gs reads no TIFF), ICC colour through lcms2.
 - ImageMagick 6: -ordered-dither o8x8 and Floyd-Steinberg (-separate -remap pattern:gray50),
@@ -24,7 +24,8 @@ seconds are printed beside wall seconds.
 Then the whole commands users run, in the same run: `wideprint rip IMG -o PLANES.tif` per method
 and planes encoding (a fresh process each: start-up, reading, RIP, deflating, writing),
 `wideprint --help` and a 100 x 100 rip, with their ratios against Ghostscript's whole commands
-(issue 17); --wide adds peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
+(issue 17); then the targeted ones paired with Ghostscript run by run (gs, wideprint, gs, ...:
+the median of per-pair ratios, immune to the machine's minute-to-minute drift); --wide adds peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
 --big also rips 40,000 x 20,000 and 40,000 x 60,000 RGB TIFFs (deflate strips, written by a
 generator that never holds the image) with bluenoise, to show that peak RSS does not grow
 with the image length.  No assertions: a measurement only.
@@ -385,6 +386,50 @@ def whole_commands(d: str, tif: str, w: int, h: int, repeat: int) -> dict:
     return res
 
 
+#: the whole commands paired with Ghostscript run by run (the issue's targets)
+PAIRED_RUNS = (("fs", "8bit"), ("fs", "packed"), ("bayer", "packed"), ("bluenoise", "packed"))
+
+
+def paired_commands(d: str, tif: str, peers: list, repeat: int) -> dict:
+    """Each targeted `wideprint rip -o` and its Ghostscript peer run alternately, `repeat`
+    pairs: this machine's speed drifts by tens of per cent from minute to minute, and a
+    ratio of two figures measured minutes apart carries that drift; the median of ratios
+    of runs made seconds apart does not.  {("paired", method, fmt): (median ratio, ratios)}"""
+    env = cli_env()
+    gs = {kind: cmd for tool, _, kind, cmd, _ in peers if tool == "ghostscript" and cmd}
+    out = os.path.join(d, "planes.tif")
+    res = {}
+    print(f"paired with Ghostscript: gs, then wideprint, {repeat} times each; ratio = gs wall / "
+          f"wideprint wall per pair, the median reported")
+    for method, fmt in PAIRED_RUNS:
+        kind = "ed" if method in ("fs", "vced") else "ordered"
+        if kind not in gs:
+            continue
+        wp = wideprint_cmd("rip", tif, "-o", out, "--size", "pixels", "--dither", method,
+                           "--planes-format", fmt)
+        pairs = []
+        for _ in range(repeat):
+            g, r = run_measured(gs[kind]), run_measured(wp, env=env)
+            if g.ok and r.ok:
+                pairs.append((g.wall, r.wall))
+        for f in os.listdir(d):
+            if f.startswith("gs_out"):
+                os.unlink(os.path.join(d, f))
+        if not pairs:
+            print(f"  rip -o {method} {fmt}: FAILED")
+            continue
+        ratios = sorted(g / r for g, r in pairs)
+        med = ratios[len(ratios) // 2] if len(ratios) % 2 else \
+            (ratios[len(ratios) // 2 - 1] + ratios[len(ratios) // 2]) / 2
+        peer = "tiffscaled4" if kind == "ed" else "bitcmyk"
+        print(f"  rip -o {method:9s} {fmt:6s} vs gs {peer:11s} median {med:5.2f}x  (pairs, gs/wideprint s: "
+              + ", ".join(f"{g:.2f}/{r:.2f}" for g, r in pairs) + ")", flush=True)
+        res[("paired", method, fmt)] = (med, ratios)
+    with contextlib.suppress(OSError):
+        os.unlink(out)
+    return res
+
+
 def wide_memory(d: str, repeat: int = 1) -> dict:
     """Peak RSS of `wideprint rip` on a 40,000 px wide RGB image and `wideprint print`
     (in-process emulator) on the widest image the default paper takes (37,600 px at 300 dpi:
@@ -628,6 +673,9 @@ def bench(args) -> None:
         if args.only != "peers" and not args.no_cli:
             print()
             res.update(whole_commands(d, tif, w, h, args.repeat))
+            if args.only is None:
+                print()
+                res.update(paired_commands(d, tif, peer_commands(d, w, h, False), args.repeat))
         print()
         print_ratios(res, w)
         if args.wide and args.only != "peers":
@@ -681,6 +729,13 @@ def print_ratios(res, w: int) -> None:
             line(f"rip -o {method} {fmt} / gs {'tiffscaled4' if peer is gs_ed else 'bitcmyk'} (whole)",
                  f"{v / peer:.2f}x", f">= {target:.0f}x" if method != "vced" else "-",
                  v / peer >= target if method != "vced" else None)
+    for (method, fmt) in PAIRED_RUNS:
+        if ("paired", method, fmt) in res:
+            med = res[("paired", method, fmt)][0]
+            target = TARGET_CLI_FS_VS_GS if method == "fs" else TARGET_CLI_ORDERED_VS_GS
+            peer = "tiffscaled4" if method == "fs" else "bitcmyk"
+            line(f"rip -o {method} {fmt} / gs {peer} (paired)", f"{med:.2f}x",
+                 f">= {target:.0f}x", med >= target)
     if ("cli", "--help") in res:
         t = res[("cli", "--help")][1].wall
         line("wideprint --help, s", f"{t:.3f}", f"<= {TARGET_HELP_S:.2f} s", t <= TARGET_HELP_S)
