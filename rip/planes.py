@@ -9,7 +9,7 @@ Two encodings of the same content, and every reader here accepts both:
   only (the RIP's planes).  8x less to compress and store; tifffile and wideprint read it,
   PIL and libvips do not (docs/formats.md says why it is not the default).
 
-Segments are deflated (zlib-ng or libdeflate through imagecodecs, zlib without it) on worker threads,
+Segments are deflated (ISA-L through python-isal; imagecodecs or zlib without it) on worker threads,
 which release the GIL, while the caller makes the next band."""
 
 from __future__ import annotations

@@ -84,8 +84,9 @@ def test_the_import_parser_sees_relative_and_lazy_imports():
 def test_the_seam_modules_import_nothing_of_wideprint(name):
     mods = imports(f"wideprint.{name}")
     assert not {m for m in mods if m.startswith(PKG)} - SEAM_TOOLS
-    # imagecodecs: tifffile's own codecs (rip/planes.py deflates with its libdeflate)
-    assert mods - SEAM_TOOLS - {"numpy", "tifffile", "imagecodecs", "tomlkit", "cv2", "numba"} <= \
+    # imagecodecs: tifffile's own codecs; isal: rip/planes.py deflates with ISA-L
+    assert mods - SEAM_TOOLS - {"numpy", "tifffile", "imagecodecs", "isal", "tomlkit", "cv2",
+                                "numba"} <= \
         set(sys.stdlib_module_names) | {"__future__"}
 
 
