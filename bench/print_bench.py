@@ -39,6 +39,28 @@ print(json.dumps(dict(wall=wall, printer_s=r.report["printer_s"], state=r.state)
 """
 
 
+# A fixed workload timed before and after the runs: this machine's speed drifts by tens of per
+# cent from minute to minute (a shared host), and the target is against the printer's own
+# clock, so a reader needs to know which kind of minute the figures come from.
+REFERENCE = r"""
+import time, zlib
+import numpy as np
+t = time.perf_counter()
+a = np.random.default_rng(0).integers(0, 2, 1 << 22, dtype=np.uint8)
+for _ in range(4):
+    zlib.compress(a.tobytes(), 1)
+n = 0
+for i in range(1_000_000):
+    n += i & 7
+print(time.perf_counter() - t)
+"""
+
+
+def reference_s(env) -> float:
+    out = subprocess.run([sys.executable, "-c", REFERENCE], env=env, capture_output=True, text=True)
+    return float(out.stdout.strip()) if out.returncode == 0 else float("nan")
+
+
 # The widest image the default profile prints at 300 dpi: its 3,200 mm sheet less the 5 mm
 # side margins, as the emulator measures the sheet's edges (rip_bench.py --wide uses it too).
 FULL_WIDTH_PX = 37_600
@@ -65,6 +87,7 @@ def main() -> None:
         print(f"job: {width} x {args.rows} px RGB at 300 ppi ({width / 300 * 25.4:.0f} mm, the "
               f"default profile's full width), --size pixels, --dither {args.dither}, "
               f"bidirectional; media written; {os.cpu_count()} cores")
+        ref0 = reference_s(env)
         print(f"{'how':44s} {'passes':>6s} {'printer s':>10s} {'wall s':>8s} {'cpu s':>8s} "
               f"{'x real time':>12s}  target")
         for p in args.passes.split(","):
@@ -95,6 +118,10 @@ def main() -> None:
                       f"{best['wall']:8.2f} {'':>8s} {sim / best['wall']:11.1f}x  >= {TARGET:.0f}x "
                       f"{'met' if sim / best['wall'] >= TARGET else 'MISSED'}  "
                       f"(runs {', '.join(f'{w:.2f}' for w in (x['wall'] for x in runs))} s)", flush=True)
+        ref1 = reference_s(env)
+        print(f"machine: a fixed reference workload (zlib and a Python loop, one core) took "
+              f"{ref0:.2f} s before and {ref1:.2f} s after the runs; compare it between runs "
+              f"taken in different minutes (bench/README.md)")
 
 
 if __name__ == "__main__":
