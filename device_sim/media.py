@@ -71,19 +71,28 @@ def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dco
                 late += hits
             continue
         row = win32[r - base]
+        if step == 1:                              # consecutive columns: a contiguous walk
+            c0 = cols[0] + d                       # over the fires on the paper; those off
+            lo = min(max(0, -c0), n)               # its edges (the heads' offsets make a
+            hi = max(min(n, width - c0), lo)       # stroke fire past them) are only counted
+            hits = 0
+            row_f = row[c0 + lo:c0 + hi]
+            for f in range(lo, hi):
+                v = (fires[f] >> shift) & np.uint32(1)
+                row_f[f - lo] += v << ink_shift
+                hits += v
+            landed += hits
+            for f in range(lo):
+                stray += (fires[f] >> shift) & np.uint32(1)
+            for f in range(hi, n):
+                stray += (fires[f] >> shift) & np.uint32(1)
+            continue
         if cmin + d >= 0 and cmax + d < width:      # every column on the paper: no branch
             hits = 0
-            if step == 1:                          # consecutive columns: a contiguous walk
-                row_f = row[cols[0] + d:cols[0] + d + n]
-                for f in range(n):
-                    v = (fires[f] >> shift) & np.uint32(1)
-                    row_f[f] += v << ink_shift
-                    hits += v
-            else:
-                for f in range(n):
-                    v = (fires[f] >> shift) & np.uint32(1)
-                    row[cols[f] + d] += v << ink_shift
-                    hits += v
+            for f in range(n):
+                v = (fires[f] >> shift) & np.uint32(1)
+                row[cols[f] + d] += v << ink_shift
+                hits += v
             landed += hits
             continue
         for f in range(n):
