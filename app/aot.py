@@ -1,6 +1,6 @@
 """Build the compiled kernels (`make` runs it; docs/rip.md, "Compiled kernels").
 
-    python -m wideprint.app.aot [--jobs N]
+    python -m wideprint.app.aot
 
 1. With numba's JIT (WIDEPRINT_KERNELS=jit), rip and print small generated jobs through
    every path that has a kernel (app/warmup.py: every halftone method, pass count and pass

@@ -2,8 +2,8 @@
 before compiling the kernels ahead of time; docs/rip.md "Compiled kernels").
 
 A kernel the ahead-of-time build does not cover runs on numba's JIT (`cache=True`: compiled
-once, then loaded from the cache beside its module); after this, even then the first print
-starts without compiling.
+once, then loaded from the cache beside its module); with the cache filled here, such a
+kernel's first call after set-up loads instead of compiling.
 Every kernel is reached by ripping and printing a small generated image on the in-process
 emulator with every halftone method, pass count and pass mask, 8 and 16 bits, RGB and CMYK.
 

@@ -25,7 +25,8 @@ Then the whole commands users run, in the same run: `wideprint rip IMG -o PLANES
 and planes encoding (a fresh process each: start-up, reading, RIP, deflating, writing),
 `wideprint --help` and a 100 x 100 rip, with their ratios against Ghostscript's whole commands
 (issue 17); then the targeted ones paired with Ghostscript run by run (gs, wideprint, gs, ...:
-the median of per-pair ratios, immune to the machine's minute-to-minute drift); --wide adds peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
+the median of per-pair ratios, immune to the machine's minute-to-minute drift); --wide adds
+peak RSS of `rip` and `print` on 40,000 / 37,600 px wide images.
 --big also rips 40,000 x 20,000 and 40,000 x 60,000 RGB TIFFs (deflate strips, written by a
 generator that never holds the image) with bluenoise, to show that peak RSS does not grow
 with the image length.  No assertions: a measurement only.
@@ -39,6 +40,7 @@ import json
 import os
 import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -419,8 +421,7 @@ def paired_commands(d: str, tif: str, peers: list, repeat: int) -> dict:
             print(f"  rip -o {method} {fmt}: FAILED")
             continue
         ratios = sorted(g / r for g, r in pairs)
-        med = ratios[len(ratios) // 2] if len(ratios) % 2 else \
-            (ratios[len(ratios) // 2 - 1] + ratios[len(ratios) // 2]) / 2
+        med = statistics.median(ratios)
         peer = "tiffscaled4" if kind == "ed" else "bitcmyk"
         print(f"  rip -o {method:9s} {fmt:6s} vs gs {peer:11s} median {med:5.2f}x  (pairs, gs/wideprint s: "
               + ", ".join(f"{g:.2f}/{r:.2f}" for g, r in pairs) + ")", flush=True)

@@ -23,12 +23,12 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "resources" / "samples" / "sample.tif"
 
 
-def _run(code: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+def _run(code: str, *args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
     env = dict(os.environ)
     env.pop("WIDEPRINT_KERNELS", None)
     env.update(env_extra or {})
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                       timeout=300)
+    r = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                       env=env, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     return r
 
@@ -79,13 +79,8 @@ for d in ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise"):
         r = api.print_file(IMG, dither=d, passes=p, size="pixels", media_out=f"{out}-{d}-{p}.tif")
         assert r.ok, r.message
 """.replace("IMG", repr(str(img)))
-    for mode in ("aot", "jit"):
-        env = {"WIDEPRINT_KERNELS": "jit"} if mode == "jit" else {}
-        r = subprocess.run([sys.executable, "-c", code, str(tmp_path / mode)],
-                           capture_output=True, text=True, timeout=300,
-                           env={**{k: v for k, v in os.environ.items() if k != "WIDEPRINT_KERNELS"},
-                                **env})
-        assert r.returncode == 0, r.stderr[-2000:]
+    _run(code, str(tmp_path / "aot"))
+    _run(code, str(tmp_path / "jit"), env_extra={"WIDEPRINT_KERNELS": "jit"})
     for a in sorted(tmp_path.glob("aot-*.tif")):
         j = tmp_path / a.name.replace("aot-", "jit-")
         da, dj = tifffile.imread(a), tifffile.imread(j)
