@@ -23,6 +23,7 @@ class Fpga:
     def __init__(self, n_heads: int, fifo_words: int, pass_buffer_words: int, ring_blocks: int,
                  almost_empty_words: int = 64, block_words: int = 128):
         self.n_heads = n_heads
+        self._absent_heads = (0,) * (8 - n_heads)      # their FIFO levels: always 0
         self.fifo_words = fifo_words
         self.pass_buffer_words = pass_buffer_words
         self.ring_blocks = ring_blocks
@@ -49,7 +50,8 @@ class Fpga:
 
     @property
     def stroke(self) -> int:
-        return self._pair(P.REG_STROKE_LO)
+        regs = self.regs        # read for every block: the pair without a call
+        return regs[P.REG_STROKE_LO] | regs[P.REG_STROKE_HI] << 16
 
     def clear_stroke(self) -> None:
         """A new job: no stroke yet (the stroke registers read NO_STROKE, nothing fired)."""
@@ -182,8 +184,8 @@ class Fpga:
     def fifo_levels(self) -> tuple[int, ...]:
         """Words in each of the 8 head FIFOs as reported (docs/protocol.md 2.5, 3.2): the
         heads advance together; a pass buffer beyond 16 bits reports 65535."""
-        level = min(self.fifo_level_words(), 0xFFFF)
-        return (level,) * self.n_heads + (0,) * (8 - self.n_heads)
+        level = min((self.loaded_fires - self.fired) * P.WORDS_PER_FIRE, 0xFFFF)
+        return (level,) * self.n_heads + self._absent_heads
 
     def ring_free(self) -> int:
         return max(0, self.ring_blocks - len(self.ring))

@@ -24,7 +24,8 @@ from .motion import ramp_counts
 from .servo import ServoMove
 
 
-_EDGE_NOZZLES = np.array([0x0001, 0x8000], np.uint16)     # nozzles 0 and 127: data there is HEAD_DATA
+# nozzles 0 and 127 (word 0 bit 0, word 7 bit 15; docs/protocol.md 4.3): data there is HEAD_DATA
+_EDGE_NOZZLES = np.array([0x0001, 0, 0, 0, 0, 0, 0, 0x8000], np.uint16)
 
 
 class LineRun:
@@ -119,13 +120,14 @@ class LineRun:
                 continue
             rb = fpga.ring[0]
             room_idx = first + rb.block.fires - cap - 1     # this fire must be made first
-            room_t = self.t_fire[room_idx] if room_idx >= 0 else -np.inf
+            t_list = self._t_list
+            room_t = t_list[room_idx] if room_idx >= 0 else -np.inf
             load_t = max(room_t, rb.ready_s + pr.dma_time(rb.block))
-            if first < self.n and load_t > self.t_fire[first] and first < self.stop_index:
+            if first < self.n and load_t > t_list[first] and first < self.stop_index:
                 if not self._starve(first, P.Fault.FIFO_UNDERRUN):
                     return True
                 continue
-            consumed = bisect_right(self._t_list, load_t, 0, first)
+            consumed = bisect_right(t_list, load_t, 0, first)
             level = first - consumed
             self.min_level = level if self.min_level is None else min(self.min_level, level)
             fpga.fired = consumed            # the line has run up to this block's DMA
@@ -200,9 +202,8 @@ class LineRun:
         if count <= 0:
             return
         words = block.words[:, :count]
-        # nozzle 0 is word 0 bit 0, nozzle 127 is word 7 bit 15 (docs/protocol.md 4.3): both
-        # looked at in one operation (words 0 and 7 of every fire), the culprit only if set
-        if (words[:, :, ::7] & _EDGE_NOZZLES).any():
+        # both edge nozzles of every fire looked at in one operation, the culprit only if set
+        if np.count_nonzero(words & _EDGE_NOZZLES):
             bad = (words[:, :, 0] & 0x0001) | (words[:, :, 7] & 0x8000)
             part, fire = np.argwhere(bad)[np.argmin(np.argwhere(bad)[:, 1])]
             mask_heads = [h for h in range(self.printer.n_heads) if block.head_mask >> h & 1]

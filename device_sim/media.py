@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from ..rip.compiled import kernel
@@ -107,6 +108,11 @@ def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dco
 
 
 class Media:
+    """Drops land on a worker thread of their own (the kernel releases the GIL), in the order
+    they were fired, while the emulator decodes the next blocks; everything that reads the
+    window or the counts (`drops`, `stray`, `late`, `snapshot`, writing rows out) waits for
+    the landings in flight first."""
+
     def __init__(self, width: int, height: int, dpi_x: float, dpi_y: float, window_rows: int,
                  path: str | None = None):
         self.width, self.height = width, height
@@ -116,40 +122,66 @@ class Media:
         self._win = np.zeros((max(window_rows, 1), width, 4), np.uint8)
         self._win32 = self._win.view(np.uint32).reshape(self._win.shape[:2])   # the same bytes
         self._base = 0                       # image row of window row 0
-        self.drops = np.zeros(4, np.int64)   # drops that landed in the image area
-        self.stray = 0                       # drops outside the image area
-        self.late = 0                        # drops on rows already written out (paper went back)
+        self._drops = np.zeros(4, np.int64)  # drops that landed in the image area
+        self._stray = 0                      # drops outside the image area
+        self._late = 0                       # drops on rows already written out (paper went back)
+        # one thread: two landings on the same dots must not run at once
+        self._lander = ThreadPoolExecutor(1, thread_name_prefix="media-land")
+        self._landing: list = []             # (channel, future) in flight
         self.closed = False
 
     def land_words(self, channel: int, words: np.ndarray, cols: np.ndarray,
                    nozzle_rows: np.ndarray, nozzle_dcols: np.ndarray | None = None) -> None:
         """Drops of one head: words (fires, 8) uint16, the media column of each fire, the
         media row of each of the 128 nozzles (docs/protocol.md 4.3 bit order) and each
-        nozzle's column offset from its fire's column (misdirection; default none)."""
+        nozzle's column offset from its fire's column (misdirection; default none).  The
+        arrays are not changed afterwards by the caller (they land later)."""
         if words.size == 0:
             return
         top = int(nozzle_rows.max())
         if top >= self._base + self._win.shape[0]:
             self.flush_below(top - self._win.shape[0] + 1)
-        landed, stray, late = _land_words(self._win32, self._base, self.height, self.width,
-                                          np.ascontiguousarray(words), cols.astype(np.int64),
-                                          nozzle_rows.astype(np.int64),
-                                          np.zeros(nozzle_rows.size, np.int64)
-                                          if nozzle_dcols is None else nozzle_dcols.astype(np.int64),
-                                          np.uint32(_INK_SHIFT[channel]))
-        self.drops[channel] += landed
-        self.stray += stray
-        self.late += late
+        args = (self._win32, self._base, self.height, self.width, np.ascontiguousarray(words),
+                cols.astype(np.int64), nozzle_rows.astype(np.int64),
+                np.zeros(nozzle_rows.size, np.int64) if nozzle_dcols is None
+                else nozzle_dcols.astype(np.int64), np.uint32(_INK_SHIFT[channel]))
+        self._landing.append((channel, self._lander.submit(_land_words, *args)))
+
+    def _landed(self) -> None:
+        """Wait for the landings in flight and add up what they counted."""
+        landing, self._landing = self._landing, []
+        for channel, fut in landing:
+            landed, stray, late = fut.result()
+            self._drops[channel] += landed
+            self._stray += stray
+            self._late += late
+
+    @property
+    def drops(self) -> np.ndarray:
+        self._landed()
+        return self._drops
+
+    @property
+    def stray(self) -> int:
+        self._landed()
+        return self._stray
+
+    @property
+    def late(self) -> int:
+        self._landed()
+        return self._late
 
     def snapshot(self, step: int = 1) -> tuple[int, np.ndarray]:
         """(first image row, copy of the rows still under or near the heads), every
         `step`-th row and column: a live view paints this over what it already has, since
         rows before it never change again."""
+        self._landed()
         first = -(-self._base // step) * step
         return first, self._win[first - self._base::step, ::step].copy()
 
     def flush_below(self, row: int) -> None:
         """Rows < row can receive no more drops: write them out."""
+        self._landed()
         row = min(row, self.height)
         n = row - self._base
         if n <= 0:
@@ -177,4 +209,5 @@ class Media:
         self.flush_below(self.height)
         if self._writer:
             self._writer.close()
+        self._lander.shutdown()
         self.closed = True

@@ -262,8 +262,8 @@ class Printer:
         f = self.fpga
         if f.underrun_mask:
             flags |= P.REPORT_UNDERRUN
-        self._data_out += P.Report(flags, f.ring_free(), f.stroke, f.blocks_moved, f.fired,
-                                   f.fifo_levels()).encode()
+        self._data_out += P.encode_report(flags, f.ring_free(), f.stroke, f.blocks_moved, f.fired,
+                                          f.fifo_levels())
 
     def pump(self) -> None:
         """Let the line run as far as its data allows; move preloaded blocks into the FIFOs."""

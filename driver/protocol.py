@@ -18,6 +18,7 @@ import zlib
 from collections import namedtuple
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 
@@ -660,8 +661,20 @@ class BlockDecoder:
         return Block(kind, mask, fires, stroke, first, words.reshape(parts, fires, WORDS_PER_FIRE))
 
 
-@dataclass(frozen=True)
-class Report:
+_CRC = struct.Struct("<I")
+
+
+def encode_report(flags: int, ring_free: int, stroke: int, blocks: int, fires_done: int,
+                  fifo) -> bytes:
+    """One report (section 3.2): its fields in, its bytes out (the emulator's FPGA sends one
+    a block, so without a Report object in between)."""
+    body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, flags, ring_free, stroke, blocks, fires_done,
+                       *fifo)
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+class Report(NamedTuple):
+    """A decoded report (a tuple: the host decodes one a block)."""
     flags: int
     ring_free: int
     stroke: int
@@ -670,9 +683,7 @@ class Report:
     fifo: tuple[int, ...]
 
     def encode(self) -> bytes:
-        body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, self.flags, self.ring_free, self.stroke,
-                           self.blocks, self.fires_done, *self.fifo)
-        return body + crc32(body).to_bytes(4, "little")
+        return encode_report(*self)
 
 
 class ReportDecoder:
