@@ -108,10 +108,14 @@ def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dco
 
 
 class Media:
-    """Drops land on a worker thread of their own (the kernel releases the GIL), in the order
-    they were fired, while the emulator decodes the next blocks; everything that reads the
-    window or the counts (`drops`, `stray`, `late`, `snapshot`, writing rows out) waits for
-    the landings in flight first."""
+    """The rolling window of rows under the heads and the TIFF they go to.
+
+    Landing drops and writing rows out run on a worker thread of their own (the landing
+    kernel releases the GIL), one after the other in the order the emulator asked for them,
+    while the emulator goes on decoding blocks and feeding paper: the line's state never
+    depends on where drops land, only what is read back does.  Reading the window or the
+    counts (`drops`, `stray`, `late`, `snapshot`, `close`) waits for the work in flight;
+    a failure in it (a full disk) surfaces at the next call."""
 
     def __init__(self, width: int, height: int, dpi_x: float, dpi_y: float, window_rows: int,
                  path: str | None = None):
@@ -121,71 +125,81 @@ class Media:
                                     description="wideprint emulator media") if path else None
         self._win = np.zeros((max(window_rows, 1), width, 4), np.uint8)
         self._win32 = self._win.view(np.uint32).reshape(self._win.shape[:2])   # the same bytes
-        self._base = 0                       # image row of window row 0
+        self._base = 0                       # image row of window row 0 (once the work queued is done)
         self._drops = np.zeros(4, np.int64)  # drops that landed in the image area
         self._stray = 0                      # drops outside the image area
         self._late = 0                       # drops on rows already written out (paper went back)
-        # one thread: two landings on the same dots must not run at once
-        self._lander = ThreadPoolExecutor(1, thread_name_prefix="media-land")
-        self._landing: list = []             # (channel, future) in flight
+        # one thread: its jobs touch the same rows and must run in order
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="media")
+        self._queued: list = []              # (channel or None, future), oldest first
         self.closed = False
+
+    def _queue(self, channel, fn, *args) -> None:
+        self._collect(wait=False)
+        self._queued.append((channel, self._worker.submit(fn, *args)))
+
+    def _collect(self, wait: bool = True) -> None:
+        """Take the results of the work done (all of it when `wait`), oldest first."""
+        q = self._queued
+        while q and (wait or q[0][1].done()):
+            channel, fut = q.pop(0)
+            counts = fut.result()
+            if channel is not None:
+                landed, stray, late = counts
+                self._drops[channel] += landed
+                self._stray += stray
+                self._late += late
 
     def land_words(self, channel: int, words: np.ndarray, cols: np.ndarray,
                    nozzle_rows: np.ndarray, nozzle_dcols: np.ndarray | None = None) -> None:
         """Drops of one head: words (fires, 8) uint16, the media column of each fire, the
         media row of each of the 128 nozzles (docs/protocol.md 4.3 bit order) and each
         nozzle's column offset from its fire's column (misdirection; default none).  The
-        arrays are not changed afterwards by the caller (they land later)."""
+        caller does not change the arrays afterwards (they land later)."""
         if words.size == 0:
             return
         top = int(nozzle_rows.max())
         if top >= self._base + self._win.shape[0]:
             self.flush_below(top - self._win.shape[0] + 1)
-        args = (self._win32, self._base, self.height, self.width, np.ascontiguousarray(words),
-                cols.astype(np.int64), nozzle_rows.astype(np.int64),
-                np.zeros(nozzle_rows.size, np.int64) if nozzle_dcols is None
-                else nozzle_dcols.astype(np.int64), np.uint32(_INK_SHIFT[channel]))
-        self._landing.append((channel, self._lander.submit(_land_words, *args)))
-
-    def _landed(self) -> None:
-        """Wait for the landings in flight and add up what they counted."""
-        landing, self._landing = self._landing, []
-        for channel, fut in landing:
-            landed, stray, late = fut.result()
-            self._drops[channel] += landed
-            self._stray += stray
-            self._late += late
+        self._queue(channel, _land_words, self._win32, self._base, self.height, self.width,
+                    np.ascontiguousarray(words), cols.astype(np.int64),
+                    nozzle_rows.astype(np.int64),
+                    np.zeros(nozzle_rows.size, np.int64) if nozzle_dcols is None
+                    else nozzle_dcols.astype(np.int64), np.uint32(_INK_SHIFT[channel]))
 
     @property
     def drops(self) -> np.ndarray:
-        self._landed()
+        self._collect()
         return self._drops
 
     @property
     def stray(self) -> int:
-        self._landed()
+        self._collect()
         return self._stray
 
     @property
     def late(self) -> int:
-        self._landed()
+        self._collect()
         return self._late
 
     def snapshot(self, step: int = 1) -> tuple[int, np.ndarray]:
         """(first image row, copy of the rows still under or near the heads), every
         `step`-th row and column: a live view paints this over what it already has, since
         rows before it never change again."""
-        self._landed()
+        self._collect()
         first = -(-self._base // step) * step
         return first, self._win[first - self._base::step, ::step].copy()
 
     def flush_below(self, row: int) -> None:
-        """Rows < row can receive no more drops: write them out."""
-        self._landed()
+        """Rows < row can receive no more drops: write them out (queued behind the drops
+        landing on them)."""
         row = min(row, self.height)
-        n = row - self._base
-        if n <= 0:
-            return
+        if row > self._base:
+            self._queue(None, self._write_out, row - self._base)
+            self._base = row
+
+    def _write_out(self, n: int) -> None:
+        """The window's first n rows to the file (the worker thread)."""
         win = self._win
         n_win = min(n, win.shape[0])
         if self._writer:
@@ -201,13 +215,15 @@ class Media:
             ctypes.memmove(win.ctypes.data, win.ctypes.data + n_win * row_bytes,
                            keep * row_bytes)
         win[keep:] = 0
-        self._base = row
 
     def close(self) -> None:
         if self.closed:
             return
         self.flush_below(self.height)
+        try:
+            self._collect()
+        finally:
+            self._worker.shutdown()
         if self._writer:
             self._writer.close()
-        self._lander.shutdown()
         self.closed = True
