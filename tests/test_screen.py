@@ -110,6 +110,16 @@ def test_pack_unpack_round_trip():
     assert np.array_equal(unpack_dots(bits, 37), dots)
 
 
+@pytest.mark.parametrize("width", [1, 7, 8, 9, 16, 17, 4099])
+def test_pack_bits_any_width_any_value(width):
+    """Eight dots a word for the four inks (rip/swath.py `_pack_bits`): every width, the
+    partial last byte, and any non-zero value as a dot (a byte's high bits too)."""
+    rng = np.random.default_rng(width)
+    dots = (rng.random((3, width, 4)) < 0.4) * rng.choice([1, 2, 16, 128, 255], (3, width, 4))
+    dots = dots.astype(np.uint8)
+    assert np.array_equal(pack_dots(dots), np.packbits(dots.transpose(0, 2, 1) > 0, axis=2))
+
+
 def plan_both(profile, dots, passes=1, mask="checker", bidir=False, band=64):
     """The same job planned with the block packer and with the per-dot packer."""
     height, width = dots.shape[:2]
