@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -135,23 +136,26 @@ class Media:
         # one thread: its jobs touch the same rows and must run in order
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="media")
         self._queued: list = []              # (channel or None, future), oldest first
+        self._books = threading.Lock()       # _queued and the counts: a live view reads too
         self.closed = False
 
     def _queue(self, channel, fn, *args) -> None:
         self._collect(wait=False)
-        self._queued.append((channel, self._worker.submit(fn, *args)))
+        with self._books:
+            self._queued.append((channel, self._worker.submit(fn, *args)))
 
     def _collect(self, wait: bool = True) -> None:
         """Take the results of the work done (all of it when `wait`), oldest first."""
-        q = self._queued
-        while q and (wait or q[0][1].done()):
-            channel, fut = q.pop(0)
-            counts = fut.result()
-            if channel is not None:
-                landed, stray, late = counts
-                self._drops[channel] += landed
-                self._stray += stray
-                self._late += late
+        with self._books:
+            q = self._queued
+            while q and (wait or q[0][1].done()):
+                channel, fut = q.pop(0)
+                counts = fut.result()          # a failure is raised once, here
+                if channel is not None:
+                    landed, stray, late = counts
+                    self._drops[channel] += landed
+                    self._stray += stray
+                    self._late += late
 
     def land_words(self, channel: int, words: np.ndarray, cols: np.ndarray,
                    nozzle_rows: np.ndarray, nozzle_dcols: np.ndarray | None = None) -> None:
@@ -222,8 +226,8 @@ class Media:
     def close(self) -> None:
         if self.closed:
             return
-        self.flush_below(self.height)
         try:
+            self.flush_below(self.height)
             self._collect()
         finally:
             self._worker.shutdown()

@@ -60,3 +60,39 @@ def test_landing_matches_the_reference(seed):
                       np.uint32(_INK_SHIFT[channel]))
     assert tuple(int(x) for x in got) == want
     assert np.array_equal(win, want_win)
+
+
+def test_media_lands_in_order_on_its_worker_and_reports_failures(tmp_path):
+    """Media.land_words and the rows written out run on the media's worker thread in the
+    order asked (device_sim/media.py): a row written out holds every drop landed on it
+    before, the counts add up once read, and a failure in the worker is raised by the next
+    call instead of being lost."""
+    from wideprint.device_sim.media import Media
+    from wideprint.rip.planes import read_planes
+
+    width, height = 64, 40
+    m = Media(width, height, 300, 300, window_rows=16, path=str(tmp_path / "m.tif"))
+    rng = np.random.default_rng(7)
+    want = np.zeros((height, width, 4), np.uint8)
+    for k in range(30):                          # each batch further down the sheet
+        top = min(k, height - 8)
+        rows = top + np.arange(128) // 16        # 8 rows, 16 nozzles each (8 of them dead-end)
+        rows[rows >= height] = -1
+        cols = np.arange(width) if k % 2 == 0 else np.arange(width)[::-1].copy()
+        words = (rng.integers(0, 1 << 16, (width, 8)) & 0x00FF).astype(np.uint16)  # bits 0-7
+        ch = k % 4
+        ref = want.copy()
+        reference(ref, 0, height, width, words, cols, rows, np.zeros(128, np.int64), ch)
+        want = ref
+        m.land_words(ch, words, cols, rows)
+        if k % 5 == 4:
+            m.flush_below(top)                   # queued behind the landings above
+    assert int(m.drops.sum()) == int(want.astype(np.int64).sum())
+    m.close()
+    assert np.array_equal(read_planes(str(tmp_path / "m.tif")), want)
+
+    bad = Media(width, height, 300, 300, window_rows=16)
+    bad._queue(None, lambda: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        bad.snapshot()
+    bad.close()
