@@ -50,8 +50,7 @@ class Fpga:
 
     @property
     def stroke(self) -> int:
-        regs = self.regs        # read for every block: the pair without a call
-        return regs[P.REG_STROKE_LO] | regs[P.REG_STROKE_HI] << 16
+        return self._pair(P.REG_STROKE_LO)
 
     def clear_stroke(self) -> None:
         """A new job: no stroke yet (the stroke registers read NO_STROKE, nothing fired)."""
@@ -184,7 +183,7 @@ class Fpga:
     def fifo_levels(self) -> tuple[int, ...]:
         """Words in each of the 8 head FIFOs as reported (docs/protocol.md 2.5, 3.2): the
         heads advance together; a pass buffer beyond 16 bits reports 65535."""
-        level = min((self.loaded_fires - self.fired) * P.WORDS_PER_FIRE, 0xFFFF)
+        level = min(self.fifo_level_words(), 0xFFFF)
         return (level,) * self.n_heads + self._absent_heads
 
     def ring_free(self) -> int:

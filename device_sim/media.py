@@ -9,22 +9,18 @@ the heads: memory is bounded by the swath, not by the job's length.
 from __future__ import annotations
 
 import ctypes
-import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from ..rip.compiled import kernel
 
-from ..rip.planes import PlanesWriter
+from ..rip.planes import INK_SHIFT, PlanesWriter
 
 
-# A dot's 4 inks are 4 bytes side by side: seen as one uint32 per dot, a row's drops of one
-# ink are added with a contiguous walk (vectorised) instead of a 4-byte stride; the ink is a
-# shift.  No carry can cross into the next ink: a dot gets a drop per pass and head at most.
-_INK_SHIFT = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
-
-
+# A dot seen as one uint32 of its 4 inks (planes.INK_SHIFT): a row's drops of one ink are
+# added with a contiguous walk (vectorised) instead of a 4-byte stride; the ink is a shift.
+# No carry can cross into the next ink: a dot gets a drop per pass and head at most.
 @kernel()
 def _land_words(win32, base, height, width, words, cols, nozzle_rows, nozzle_dcols, ink_shift):
     """Scatter the drops of packed fire words: bit z of fire f lands at
@@ -172,7 +168,7 @@ class Media:
                     np.ascontiguousarray(words), cols.astype(np.int64),
                     nozzle_rows.astype(np.int64),
                     np.zeros(nozzle_rows.size, np.int64) if nozzle_dcols is None
-                    else nozzle_dcols.astype(np.int64), np.uint32(_INK_SHIFT[channel]))
+                    else nozzle_dcols.astype(np.int64), np.uint32(INK_SHIFT[channel]))
 
     @property
     def drops(self) -> np.ndarray:

@@ -661,16 +661,13 @@ class BlockDecoder:
         return Block(kind, mask, fires, stroke, first, words.reshape(parts, fires, WORDS_PER_FIRE))
 
 
-_CRC = struct.Struct("<I")
-
-
 def encode_report(flags: int, ring_free: int, stroke: int, blocks: int, fires_done: int,
                   fifo) -> bytes:
     """One report (section 3.2): its fields in, its bytes out (the emulator's FPGA sends one
     a block, so without a Report object in between)."""
     body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, flags, ring_free, stroke, blocks, fires_done,
                        *fifo)
-    return body + _CRC.pack(zlib.crc32(body))
+    return body + crc32(body).to_bytes(4, "little")
 
 
 class Report(NamedTuple):

@@ -20,6 +20,7 @@ import queue
 import secrets
 import shutil
 import stat
+import sys
 import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -36,6 +37,10 @@ FORMATS = ("8bit", "packed")
 DEFLATE_LEVEL = 1          # level 6 gives files ~25 % smaller at 3-5x the CPU time
 _ABORT = object()
 _NIBBLE_MASKS = (0x88, 0x44, 0x22, 0x11)      # C, M, Y, K of the two dots in a packed byte
+# A dot's 4 inks are 4 bytes side by side: seen as one uint32 per dot, ink c is the byte at
+# bit INK_SHIFT[c] (rip/swath.py packs 8 dots' inks in one word; the emulator's media lands
+# drops of one ink with a shift).
+INK_SHIFT = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
 
 
 def _spread_table() -> np.ndarray:

@@ -23,13 +23,13 @@ Memory: a rolling window of N*A rows plus one input band.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 from .compiled import kernel
 
 from .parallel import run_parallel, split
+from .planes import INK_SHIFT
 from .profile import COLORS, Profile, ProfileError
 
 from .settings import PASS_COUNTS, PASS_MASKS  # noqa: F401 - declared with the settings schema
@@ -318,22 +318,18 @@ def unpack_dots(bits: np.ndarray, width: int) -> np.ndarray:
     return np.ascontiguousarray(dots.transpose(0, 2, 1))
 
 
-# A dot's 4 inks are the 4 bytes of one uint32 (C in the lowest byte on a little-endian
-# machine): `_pack_bits` packs 8 dots' inks at once in the 4 lanes of one word.
-_LANE = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
-
-
 @kernel()
 def _pack_bits(band, out):
     """(rows, width, 4) dots -> (rows, 4, width/8) bits, x = 0 in bit 7 of byte 0; any
     non-zero value is a dot.  Eight dots at a time for the four inks together: each dot
-    as one uint32 of its 4 ink bytes, each byte folded to its bit 0, shifted into place
-    and OR-ed, one lane per ink (no lane can carry into the next): 2.6x the speed of a
-    bit per ink and dot (1.66 -> 0.63 ns a dot)."""
+    as one uint32 of its 4 ink bytes (planes.INK_SHIFT), each byte folded to its bit 0,
+    shifted into place and OR-ed, one lane per ink (no lane can carry into the next):
+    2.6x the speed of a bit per ink and dot (1.66 -> 0.63 ns a dot)."""
     rows, width = band.shape[0], band.shape[1]
     full = width // 8
     m1 = np.uint32(0x01010101)
-    l0, l1, l2, l3 = np.uint32(_LANE[0]), np.uint32(_LANE[1]), np.uint32(_LANE[2]), np.uint32(_LANE[3])
+    l0, l1, l2, l3 = (np.uint32(INK_SHIFT[0]), np.uint32(INK_SHIFT[1]), np.uint32(INK_SHIFT[2]),
+                      np.uint32(INK_SHIFT[3]))
     ff = np.uint32(0xFF)
     for r in range(rows):
         px = band[r].reshape(-1).view(np.uint32)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wideprint.device_sim.media import _INK_SHIFT, _land_words
+from wideprint.device_sim.media import _land_words
+from wideprint.rip.planes import INK_SHIFT
 
 
 def reference(win, base, height, width, words, cols, rows, dcols, channel):
@@ -57,7 +58,7 @@ def test_landing_matches_the_reference(seed):
     want = reference(want_win, base, height, width, words, cols, rows_in, dcols, channel)
     got = _land_words(win.view(np.uint32).reshape(nwin, width), base, height, width, words,
                       cols.astype(np.int64), rows_in.astype(np.int64), dcols.astype(np.int64),
-                      np.uint32(_INK_SHIFT[channel]))
+                      np.uint32(INK_SHIFT[channel]))
     assert tuple(int(x) for x in got) == want
     assert np.array_equal(win, want_win)
 
