@@ -9,8 +9,9 @@ Two encodings of the same content, and every reader here accepts both:
   only (the RIP's planes).  8x less to compress and store; tifffile and wideprint read it,
   PIL and libvips do not (docs/formats.md says why it is not the default).
 
-Segments are deflated (ISA-L through python-isal; imagecodecs or zlib without it) on worker threads,
-which release the GIL, while the caller makes the next band."""
+Segments are deflated on worker threads, which release the GIL, while the caller makes the
+next band: 8-bit tiles of 0/1 samples by the dot coder (rip/dotdeflate.py), the rest by
+ISA-L (python-isal; imagecodecs or zlib without it)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ import numpy as np
 import tifffile
 
 from .compiled import kernel
+from .dotdeflate import deflate_dot_tile
 
 TILE = (64, 1024)          # the 8-bit encoding's tiles
 STRIP_ROWS = 64            # the packed encoding's strips
@@ -203,7 +205,8 @@ class PlanesWriter:
         if kind == "bits":
             band, kind = _bits_to_nibbles(band, self.width), "nibbles"
         th, tw = TILE
-        tile = np.zeros((th, tw, 4), np.uint8)
+        # 0/1 samples go to the dot coder as the packed rows they are (docs/formats.md)
+        tile = np.zeros((th, tw // 2) if kind == "nibbles" else (th, tw, 4), np.uint8)
         out = []
         for x in range(0, self.width, tw):       # a tile at a time: memory is a tile
             ww = min(tw, self.width - x)
@@ -213,11 +216,8 @@ class PlanesWriter:
                 continue
             if n < th or ww < tw:
                 tile[:] = 0
-            if kind == "nibbles":                 # tiles are 1024 wide: x // 2 is exact
-                tile[:n, :ww] = np.unpackbits(part, axis=1, count=ww * 4).reshape(n, ww, 4)
-            else:
-                tile[:n, :ww] = part
-            out.append(self._deflate(tile))
+            tile[:n, :part.shape[1]] = part       # tiles are 1024 wide: x // 2 is exact
+            out.append(deflate_dot_tile(tile) if kind == "nibbles" else self._deflate(tile))
         return out, dots
 
     def _blank_tile(self) -> bytes:
@@ -283,7 +283,11 @@ class PlanesWriter:
         n = min(self.rows_per_segment, allrows.shape[0])
         band = np.ascontiguousarray(allrows[:n])
         rest = allrows[n:]
-        self._pending = [(kind, rest)] if rest.shape[0] else []
+        if kind == "dots" and rest.size and int(rest.max()) <= 1:     # past the doubled dot
+            rest, kind_rest = np.packbits(rest.reshape(rest.shape[0], -1), axis=1), "nibbles"
+        else:
+            kind_rest = kind
+        self._pending = [(kind_rest, rest)] if rest.shape[0] else []
         self._pending_rows = rest.shape[0]
         future = self._pool.submit(self._encode, kind, band)
         while True:                 # never block forever on a writer that has failed
@@ -370,10 +374,46 @@ def output_file(path: str | Path):
 def read_planes(path: str | Path) -> np.ndarray:
     """The whole planes/media TIFF, either encoding, as (rows, cols, 4) uint8 (tests and
     small jobs)."""
+    with tifffile.TiffFile(str(path)) as tf:
+        page = tf.pages[0]
+        if (page.is_tiled and page.compression == 8 and page.predictor == 1 and page.planarconfig == 1
+                and page.bitspersample == 8 and page.shape[2:] == (4,) and len(page.shape) == 3):
+            return _read_tiles(tf.filehandle, page)
     data = tifffile.imread(str(path))
     if data.ndim != 3 or data.shape[2] != 4:
         raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {data.shape})")
     return data.view(np.uint8) if data.dtype == np.bool_ else data
+
+
+def _read_tiles(fh, page) -> np.ndarray:
+    """An 8bit file's tiles inflated by ISA-L on two threads (twice zlib's speed: reading a
+    full-width print's media back is a good part of an acceptance test's time)."""
+    from isal import isal_zlib
+    h, w = page.shape[:2]
+    th, tw = page.tilelength, page.tilewidth
+    across = -(-w // tw)
+    out = np.empty((h, w, 4), np.uint8)
+
+    def inflate(k, data):
+        y, x = (k // across) * th, (k % across) * tw
+        hh, ww = min(th, h - y), min(tw, w - x)
+        if not data:                                 # a tile never written: blank, as in tifffile
+            out[y:y + hh, x:x + ww] = 0
+            return
+        try:
+            tile = np.frombuffer(isal_zlib.decompress(data, bufsize=th * tw * 4), np.uint8)
+        except isal_zlib.error as exc:
+            raise ValueError(f"{fh.name}: tile {k} does not inflate: {exc}") from None
+        if tile.size != th * tw * 4:
+            raise ValueError(f"{fh.name}: tile {k} holds {tile.size} bytes, not {th * tw * 4}")
+        out[y:y + hh, x:x + ww] = tile.reshape(th, tw, 4)[:hh, :ww]
+
+    with ThreadPoolExecutor(2, thread_name_prefix="planes-inflate") as pool:
+        done = [pool.submit(inflate, k, data)
+                for data, k in fh.read_segments(page.dataoffsets, page.databytecounts, sort=True)]
+        for f in done:
+            f.result()
+    return out
 
 
 def planes_format(path: str | Path) -> str:

@@ -117,8 +117,8 @@ def test_a_call_the_build_did_not_see_goes_to_the_jit():
 def test_compiled_kernels_release_the_gil():
     """The RIP's worker threads run the compiled kernels in parallel: while one runs for a
     while in a thread, this thread keeps running Python."""
-    from wideprint.rip.halftone import _fs_planes
-    assert compiled._compiled_table(_fs_planes), "no compiled _fs_planes (run make)"
+    from wideprint.rip.halftone import _fs_four
+    assert compiled._compiled_table(_fs_four), "no compiled _fs_four (run make)"
     src = np.random.default_rng(1).integers(0, 256, (2000, 8000, 4), dtype=np.uint8)
     dst = np.empty_like(src)
     err = np.zeros((4, 2, 8004), np.int32)
@@ -126,7 +126,7 @@ def test_compiled_kernels_release_the_gil():
 
     def work():
         started.set()
-        _fs_planes(src, dst, err, 0, 0, 4)
+        _fs_four(src, dst, err, 0)
         done.set()
 
     t = threading.Thread(target=work)

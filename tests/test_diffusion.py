@@ -139,6 +139,35 @@ def test_deterministic_and_thread_independent(method):
     assert np.array_equal(a, b) and np.array_equal(a, c)
 
 
+def test_four_ink_loop_is_the_pairs_and_the_single_inks_bit_for_bit():
+    """vced's CMYK loop (vc_four) against two inks a loop (vc_twos) and one ink at a time
+    (vc_planes), band after band with the error rows carried: the same dots."""
+    rng = np.random.default_rng(21)
+    w = 700
+    ramp = np.linspace(0, 255, w)[None, :, None] * np.ones((1, 1, 4))
+    bands = [rng.integers(0, 256, (7, w, 4), dtype=np.uint8),
+             np.clip(ramp + rng.normal(0, 12, (9, w, 4)), 0, 255).astype(np.uint8),
+             np.full((4, w, 4), (3, 128, 250, 17), np.uint8)]
+    d = VCDiffuser(w, 4, modulation_noise())
+    errs = {k: np.zeros_like(d.err) for k in ("four", "twos", "planes")}
+    row = 0
+    for band in bands:
+        out = {k: np.zeros_like(band) for k in errs}
+        diffusion.vc_four(band, out["four"], errs["four"], row, d.tab, d.noise, d.offsets)
+        diffusion.vc_twos(band, out["twos"], errs["twos"], row, d.pairs, 0, 2, d.tab, d.noise,
+                          d.offsets)
+        diffusion.vc_planes(band, out["planes"], errs["planes"], row, 0, 4, d.wn, d.wdl, d.mod,
+                            d.noise, d.offsets)
+        assert np.array_equal(out["four"], out["twos"]) and np.array_equal(out["four"], out["planes"])
+        assert out["four"].any() and not out["four"].all()
+        row += band.shape[0]
+    # and the diffuser takes that loop for CMYK: the same as the kernel called directly
+    again = VCDiffuser(w, 4, modulation_noise())
+    assert len(again.jobs(bands[0], np.zeros_like(bands[0]), 2)) == 1
+    assert np.array_equal(np.concatenate([again.process(b) for b in bands]),
+                          np.concatenate([VCDiffuser(w, 4, modulation_noise()).process(np.concatenate(bands))]))
+
+
 @pytest.mark.parametrize("method", VARIABLE)
 def test_extremes_hold_whatever_the_error(method):
     """White-box: absurd pending errors cannot give ink 0 a drop or ink 255 a hole."""

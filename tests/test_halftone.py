@@ -531,3 +531,27 @@ def test_bad_constructor_arguments():
         Halftoner("fs", 0)
     with pytest.raises(ValueError):
         Halftoner("bayer", 10, channels=0)
+
+
+def test_fs_four_ink_loop_is_one_plane_at_a_time_bit_for_bit():
+    """Floyd-Steinberg's CMYK loop (`_fs_four`) against `_fs_plane` on each plane and
+    `_fs_planes` (two a loop), band after band with the error rows carried."""
+    from wideprint.rip import halftone as H
+    rng = np.random.default_rng(5)
+    w = 901
+    img = np.concatenate([rng.integers(0, 256, (9, w, 4), dtype=np.uint8),
+                          np.full((6, w, 4), (1, 127, 128, 254), np.uint8),
+                          rng.integers(100, 140, (8, w, 4), dtype=np.uint8)])
+    errs = [np.zeros((4, 2, w + 4), np.int32) for _ in range(3)]
+    outs = [np.zeros_like(img) for _ in range(3)]
+    for a, b in ((0, 9), (9, 10), (10, 23)):
+        band = np.ascontiguousarray(img[a:b])
+        H._fs_four(band, outs[0][a:b], errs[0], a)
+        H._fs_planes(band, outs[1][a:b], errs[1], a, 0, 4)
+        for c in range(4):
+            o = np.zeros(band.shape[:2], np.uint8)
+            H._fs_plane(np.ascontiguousarray(band[:, :, c]), o, errs[2][c], a)
+            outs[2][a:b, :, c] = o
+    assert np.array_equal(outs[0], outs[1]) and np.array_equal(outs[0], outs[2])
+    assert np.array_equal(errs[0], errs[1])
+    assert 0 < outs[0].mean() < 1

@@ -68,9 +68,11 @@ def in_folder(folder: str) -> list[str]:
 # the shared seam (docs/architecture.md): the wire protocol, the printer description, the
 # job settings schema and the planes/media file format (docs/formats.md); each imports
 # nothing else of wideprint, so whoever imports them imports only them
-NEUTRAL = ("driver.protocol", "rip.profile", "rip.settings", "rip.planes", "rip.compiled")
-#: what a seam module may use: the kernels' compiler (rip/compiled.py, a leaf itself)
-SEAM_TOOLS = {f"{PKG}.rip.compiled"}
+NEUTRAL = ("driver.protocol", "rip.profile", "rip.settings", "rip.planes", "rip.compiled",
+           "rip.dotdeflate")
+#: what a seam module may use: the kernels' compiler (rip/compiled.py) and the planes file's
+#: dot coder (rip/dotdeflate.py), leaves themselves
+SEAM_TOOLS = {f"{PKG}.rip.compiled", f"{PKG}.rip.dotdeflate"}
 
 
 def test_the_import_parser_sees_relative_and_lazy_imports():
