@@ -420,12 +420,17 @@ class PrintJob:
         rep, prof, rip = self.report, self.profile, self.rip
         rep.state = "printing"
         rep.width_dots, rep.height_rows = rip.width, rip.height
+        strokes = None
         try:
             try:                                 # planned first: a refusal moves nothing
                 planner = rip.planner()
             except ProfileError as exc:          # e.g. dead nozzles a single pass cannot avoid
                 raise JobError(f"{rip.path}: {exc}") from None
             self.line_speed()
+            # the RIP starts now, on its own thread: the first strokes are made while the
+            # printer is connected, homed and the job placed (a full-width job's first stroke
+            # takes ~0.2 s to RIP; the printer's readiness as long again)
+            strokes = prefetch(rip.strokes(planner), depth=2)
             self._state("connecting")
             self._recovering(self.prepare, "connecting")
             if self.care is None:
@@ -446,7 +451,7 @@ class PrintJob:
             next_stroke = resume_stroke(self.resume) if self.resume else 0
             self._checkpoint(x0=x0, paper0=paper0, next_stroke=next_stroke)
             top0 = planner.top_row(0) - top
-            for stroke in prefetch(rip.strokes(planner), depth=2):
+            for stroke in strokes:
                 if stroke.index < next_stroke:       # printed before the interruption
                     rep.strokes_printed += 1
                     for c in range(4):
@@ -493,6 +498,8 @@ class PrintJob:
             self._state("failed", rep.message)
             raise JobError(rep.message, getattr(exc, "fault", 0), getattr(exc, "stroke", None)) from exc
         finally:
+            if strokes is not None:
+                strokes.close()                  # a job that ended early stops its RIP
             rep.retries = self.dev.link.retries
             self.telemetry.recoveries = rep.recoveries
             rep.wall_s = time.monotonic() - t0

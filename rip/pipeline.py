@@ -28,42 +28,67 @@ from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
 BAND_PIXELS = 1 << 19     # pixels per band, at most (RipJob.band_rows)
 
 
-def prefetch(items: Iterator, depth: int = 2) -> Iterator:
-    """Run a generator in a background thread, `depth` items ahead, so the RIP works on
-    the next strokes while the printer prints this one.  Exceptions arrive in order."""
-    import queue
-    import threading
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    done = object()
-    stop = threading.Event()
+class Prefetch:
+    """`items` run in a background thread, `depth` items ahead, from the moment this is
+    made: so the RIP works on the first strokes while the printer is brought to readiness,
+    and on the next ones while it prints this one.  Exceptions arrive in order.  close()
+    (also on garbage collection, and by `yield from` when its generator closes) stops the
+    thread at its next item."""
 
-    def produce():
+    _DONE = object()
+
+    def __init__(self, items: Iterator, depth: int = 2):
+        import queue
+        import threading
+        self._q: queue.Queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._finished = False
+        self._thread = threading.Thread(target=self._produce, args=(items,), name="rip-prefetch",
+                                        daemon=True)
+        self._thread.start()
+
+    def _produce(self, items: Iterator) -> None:
+        import queue
         try:
             for item in items:
-                while not stop.is_set():
+                while not self._stop.is_set():
                     try:
-                        q.put(item, timeout=0.1)
+                        self._q.put(item, timeout=0.1)
                         break
                     except queue.Full:
                         continue
-                if stop.is_set():
+                if self._stop.is_set():
                     return
-            q.put(done)
+            self._q.put(self._DONE)
         except BaseException as exc:  # handed to the consumer
-            q.put(exc)
+            self._q.put(exc)
 
-    t = threading.Thread(target=produce, name="rip-prefetch", daemon=True)
-    t.start()
-    try:
-        while True:
-            item = q.get()
-            if item is done:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-    finally:
-        stop.set()
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        if self._finished:
+            raise StopIteration
+        item = self._q.get()
+        if item is self._DONE:
+            self.close()
+            raise StopIteration
+        if isinstance(item, BaseException):
+            self.close()
+            raise item
+        return item
+
+    def close(self) -> None:
+        self._finished = True
+        self._stop.set()
+
+    def __del__(self):
+        self.close()
+
+
+def prefetch(items: Iterator, depth: int = 2) -> Prefetch:
+    """`Prefetch(items, depth)`: the thread starts now, not at the first item."""
+    return Prefetch(items, depth)
 
 
 def profile_curves(profile: Profile, dpi: int | None = None) -> np.ndarray | None:
