@@ -177,7 +177,7 @@ def _put(out, o, acc, n, code, bits):
     return o, acc, n
 
 
-@kernel()
+@kernel(inline="always")
 def _put_run(out, o, acc, n, run, byte, byte_code, byte_bits, match_code, match_bits):  # pragma: no cover
     """`run` repeats of the previous byte: from _MIN_RUN on, 8 x run samples as matches at
     distance 8, in pieces of at most 258, none shorter than 3; fewer as literals."""
