@@ -32,8 +32,9 @@ class Prefetch:
     """`items` run in a background thread, `depth` items ahead, from the moment this is
     made: so the RIP works on the first strokes while the printer is brought to readiness,
     and on the next ones while it prints this one.  Exceptions arrive in order.  close()
-    (also on garbage collection, and by `yield from` when its generator closes) stops the
-    thread at its next item."""
+    (also when the consumer drops it: the thread holds no reference to it, so it is
+    collected; and by `yield from` when its generator closes) stops the thread at its next
+    item."""
 
     _DONE = object()
 
@@ -43,25 +44,25 @@ class Prefetch:
         self._q: queue.Queue = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
         self._finished = False
-        self._thread = threading.Thread(target=self._produce, args=(items,), name="rip-prefetch",
-                                        daemon=True)
-        self._thread.start()
+        threading.Thread(target=Prefetch._produce, args=(items, self._q, self._stop),
+                         name="rip-prefetch", daemon=True).start()
 
-    def _produce(self, items: Iterator) -> None:
+    @staticmethod
+    def _produce(items: Iterator, q, stop) -> None:
         import queue
         try:
             for item in items:
-                while not self._stop.is_set():
+                while not stop.is_set():
                     try:
-                        self._q.put(item, timeout=0.1)
+                        q.put(item, timeout=0.1)
                         break
                     except queue.Full:
                         continue
-                if self._stop.is_set():
+                if stop.is_set():
                     return
-            self._q.put(self._DONE)
+            q.put(Prefetch._DONE)
         except BaseException as exc:  # handed to the consumer
-            self._q.put(exc)
+            q.put(exc)
 
     def __iter__(self):
         return self

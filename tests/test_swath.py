@@ -149,3 +149,49 @@ def test_pass_masks_share_dots_between_passes(profile, mask):
         assert ends < 0.5 * mid
     else:
         assert abs(ends - mid) < 0.1 * mid
+
+
+def test_prefetch_starts_at_once_and_stops_when_closed_or_dropped():
+    """rip/pipeline.py Prefetch: the producer runs before the first item is asked for (the
+    job's RIP works while the printer gets ready), items and errors arrive in order, and a
+    consumer that closes it or just drops it stops its thread."""
+    import gc
+    import threading
+    import time
+
+    from wideprint.rip.pipeline import prefetch
+
+    started = threading.Event()
+    made = []
+
+    def items(n, fail_at=None):
+        started.set()
+        for i in range(n):
+            if i == fail_at:
+                raise ValueError(f"item {i}")
+            made.append(i)
+            yield i
+
+    def threads():
+        return sum(t.name == "rip-prefetch" for t in threading.enumerate())
+
+    base = threads()
+    p = prefetch(items(3), depth=2)
+    assert started.wait(2)                      # running before anyone iterates
+    assert list(p) == [0, 1, 2]
+    with pytest.raises(ValueError, match="item 1"):
+        list(prefetch(items(5, fail_at=1)))
+    for drop in (False, True):                  # an endless producer, abandoned
+        made.clear()
+        p = prefetch(items(10**9), depth=2)
+        assert next(p) == 0
+        if drop:
+            del p
+            gc.collect()
+        else:
+            p.close()
+        deadline = time.monotonic() + 3
+        while threads() > base and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert threads() == base
+        assert len(made) <= 4                   # it stopped at its next item
