@@ -149,13 +149,25 @@ _MIN_PARALLEL_PIXELS = 1 << 16
 # numba kernels
 # --------------------------------------------------------------------------
 
+@kernel(inline="always")
+def _fs_step(lvl, a):
+    """One pixel of one ink of Floyd-Steinberg (the FS kernels below all take it from here):
+    `lvl` the ink level, `a` the error diffused into it (1/16 level), clamped to +-127
+    levels.  Returns (dot, the next pixel's share 7/16, e = the error's sixteenths): the
+    row below gets 3 e, 5 e and e, the next pixel the rest, so no error is lost."""
+    v = np.int64(lvl) * 16 + min(max(a, -2032), 2032)     # 127 * 16
+    dot = ((v - 2048) >> 63) + 1                          # 1 if v >= 128*16 else 0, branch-free
+    v -= dot * 4080
+    e = v >> 4
+    return dot, e * 7 + (v - (e << 4)), e
+
+
 @kernel()
 def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
     """Floyd-Steinberg, serpentine, integer.  src/dst: (rows, width) uint8 views,
     err: (2, width + 4) int32 ring of error rows (units of 1/16 level) indexed by
     absolute row & 1; row0: absolute index of src[0]."""
     rows, width = src.shape
-    lim = 127 * 16
     for i in range(rows):
         r = row0 + i
         cur = err[r & 1]
@@ -166,14 +178,8 @@ def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
         if (r & 1) == 0:
             for x in range(width):
                 p = x + 2
-                a = cur[p] + carry
-                a = min(max(a, -lim), lim)
-                v = np.int64(src[i, x]) * 16 + a
-                dot = ((v - 2048) >> 63) + 1  # 1 if v >= 128*16 else 0, branch-free
+                dot, carry, e = _fs_step(src[i, x], cur[p] + carry)
                 dst[i, x] = dot
-                v -= dot * 4080
-                e = v >> 4
-                carry = e * 7 + (v - (e << 4))
                 nxt[p - 1] = s1 + 3 * e
                 s1 = s0 + 5 * e
                 s0 = e
@@ -181,14 +187,8 @@ def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
         else:
             for x in range(width - 1, -1, -1):
                 p = x + 2
-                a = cur[p] + carry
-                a = min(max(a, -lim), lim)
-                v = np.int64(src[i, x]) * 16 + a
-                dot = ((v - 2048) >> 63) + 1
+                dot, carry, e = _fs_step(src[i, x], cur[p] + carry)
                 dst[i, x] = dot
-                v -= dot * 4080
-                e = v >> 4
-                carry = e * 7 + (v - (e << 4))
                 nxt[p + 1] = s1 + 3 * e
                 s1 = s0 + 5 * e
                 s0 = e
@@ -204,7 +204,6 @@ def _fs_two(src3, dst3, err3, row0, c):  # pragma: no cover - compiled
     bound by the latency of its carry): 1.25-1.3x the throughput of one plane after the
     other (8,000 x 1,000 x 4 on one core: 0.112-0.130 -> 0.086-0.106 s)."""
     rows, width = src3.shape[0], src3.shape[1]
-    lim = 127 * 16
     ea = err3[c]
     eb = err3[c + 1]
     for i in range(rows):
@@ -218,20 +217,10 @@ def _fs_two(src3, dst3, err3, row0, c):  # pragma: no cover - compiled
         for k in range(width):
             x = k + back * (width - 1 - 2 * k)
             p = x + 2
-            a = min(max(cura[p] + carrya, -lim), lim)
-            b = min(max(curb[p] + carryb, -lim), lim)
-            v = np.int64(src3[i, x, c]) * 16 + a
-            w = np.int64(src3[i, x, c + 1]) * 16 + b
-            dot = ((v - 2048) >> 63) + 1     # 1 if v >= 128*16 else 0, branch-free
-            dotb = ((w - 2048) >> 63) + 1
+            dot, carrya, e = _fs_step(src3[i, x, c], cura[p] + carrya)
+            dotb, carryb, f = _fs_step(src3[i, x, c + 1], curb[p] + carryb)
             dst3[i, x, c] = dot
             dst3[i, x, c + 1] = dotb
-            v -= dot * 4080
-            w -= dotb * 4080
-            e = v >> 4
-            f = w >> 4
-            carrya = e * 7 + (v - (e << 4))
-            carryb = f * 7 + (w - (f << 4))
             nxta[p - d] = s1a + 3 * e
             nxtb[p - d] = s1b + 3 * f
             s1a = s0a + 5 * e
@@ -243,16 +232,6 @@ def _fs_two(src3, dst3, err3, row0, c):  # pragma: no cover - compiled
         nxtb[end] = s1b
         cura[:] = 0
         curb[:] = 0
-
-
-@kernel(inline="always")
-def _fs_step(lvl, a):
-    """One pixel of one ink of `_fs_plane`: (dot, next-pixel share, error e = v >> 4)."""
-    v = np.int64(lvl) * 16 + min(max(a, -2032), 2032)     # lim = 127 * 16
-    dot = ((v - 2048) >> 63) + 1
-    v -= dot * 4080
-    e = v >> 4
-    return dot, e * 7 + (v - (e << 4)), e
 
 
 @kernel()
