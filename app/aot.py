@@ -63,6 +63,11 @@ def exercise() -> None:
             if not r.ok:                # no Ghostscript here: that path stays with the JIT
                 print(f"aot: the EPS path not exercised ({r.message})", file=sys.stderr)
         planes.write_preview(media, Path(d) / "m.png")
+        from ..rip.pipeline import RipJob
+        from ..rip.settings import Placement, RipSettings
+        for fmt in planes.FORMATS:                  # `rip -o`: the RIP's bits to the planes file
+            RipJob(str(images[1]), RipSettings(dither="bayer", placement=Placement(size="pixels"))
+                   ).write_planes(Path(d) / f"p-{fmt}.tif", fmt)
         grey = images[0]
         api.predict_scan(grey, Path(d) / "scan.tif", size="pixels")
         api.predict_scan(grey, Path(d) / "scan-grey.tif", size="pixels", grey=True)

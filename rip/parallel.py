@@ -1,38 +1,81 @@
-"""The RIP's worker threads: one small pool (as many workers as cores, at most 2 here)
-shared by every compiled kernel.  Kernels are numba `nogil`, so they run truly in
-parallel; the pool is made anew in a forked child, whose copy has no threads."""
+"""The RIP's worker threads: small pools (as many workers as cores, at most 2 here) shared
+by every compiled kernel.  Kernels are numba `nogil`, so they run truly in parallel; the
+pools are made anew in a forked child, whose copy has no threads.
+
+Two ways to use both cores (docs/rip.md "Threads"):
+- `run_parallel`: one band's work split across the workers and waited for (the
+  halftoner's planes, whose error rows pass from band to band);
+- `ordered`: whole bands side by side, results in order, for stages whose bands are
+  independent (separation, ordered screening).  No barrier per band: a split band waits
+  for its slower half, and a half is slow whenever the driver, reader or writer threads
+  hold a core - in a whole `rip -o` the two screening workers were each busy only ~50 %.
+"""
 
 from __future__ import annotations
 
+import collections
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Iterator, TypeVar
+
+T = TypeVar("T")
 
 WORKERS = max(1, min(2, os.cpu_count() or 1))
-_POOL: ThreadPoolExecutor | None = None
-_POOL_PID = -1
+_POOLS: dict[str, tuple[ThreadPoolExecutor, int]] = {}
 _LOCK = threading.Lock()
+_HERE = threading.local()          # .inline: this thread runs a whole band; no splitting
+
+
+def _band_worker() -> None:
+    _HERE.inline = True
+
+
+def _pool(name: str, initializer=None) -> ThreadPoolExecutor:
+    with _LOCK:
+        pool, pid = _POOLS.get(name, (None, -1))
+        if pool is None or pid != os.getpid():
+            pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix=name,
+                                      initializer=initializer)
+            _POOLS[name] = (pool, os.getpid())
+        return pool
 
 
 def pool() -> ThreadPoolExecutor:
-    global _POOL, _POOL_PID
-    with _LOCK:
-        if _POOL is None or _POOL_PID != os.getpid():
-            _POOL = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="wideprint-rip")
-            _POOL_PID = os.getpid()
-        return _POOL
+    return _pool("wideprint-rip")
 
 
 def run_parallel(jobs) -> None:
-    """Run callables on the pool (one alone runs here) and wait for all of them; the first
-    exception is raised."""
+    """Run callables on the pool (one alone runs here, and all of them here on a thread of
+    `ordered`, which already keeps every core busy with other bands) and wait for all of
+    them; the first exception is raised."""
     jobs = list(jobs)
-    if len(jobs) == 1:
-        jobs[0]()
+    if len(jobs) == 1 or getattr(_HERE, "inline", False):
+        for job in jobs:
+            job()
         return
     futures = [pool().submit(job) for job in jobs]
     for f in futures:
         f.result()
+
+
+def ordered(jobs: Iterator[Callable[[], T]], ahead: int = WORKERS + 1) -> Iterator[T]:
+    """Each job (a band's work; nothing shared with the other jobs) run on a band worker,
+    up to `ahead` at once, the results yielded in the jobs' order.  `jobs` is drawn here, in
+    the consumer's thread, one ahead of what the workers need.  Its own pool: the
+    halftoner's `run_parallel` jobs never queue behind separation bands."""
+    pending: collections.deque = collections.deque()
+    workers = _pool("wideprint-band", _band_worker)
+    try:
+        for job in jobs:
+            pending.append(workers.submit(job))
+            if len(pending) >= ahead:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+    finally:                    # closed early or failed: what has not started never will
+        for f in pending:
+            f.cancel()
 
 
 def split(n: int, parts: int = WORKERS, minimum: int = 1) -> list[tuple[int, int]]:

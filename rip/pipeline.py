@@ -17,6 +17,7 @@ from .color import Separator
 from .halftone import ORDERED, Halftoner
 from .inputs import open_source, prescreened_packed
 from .load import ImageSource, open_image  # noqa: F401 - re-exported
+from .parallel import ordered
 from .place import place  # noqa: F401 - re-exported
 from .planes import PlanesWriter
 from .profile import COLORS, Profile, load_profile
@@ -278,9 +279,11 @@ class RipJob(PrintableJob):
             return
         sep = self._separator()
         ht = Halftoner(self.settings.dither, self.width, channels=4)
-        # two stages on two cores: loading and separating the next band overlaps the
-        # halftoning and stroke packing of this one
-        separated = (sep.convert(band) for band in self.source.bands(self.band_rows))
+        # the band workers separate the next bands, side by side, while this thread
+        # halftones this one (error diffusion: band after band) and the caller packs its
+        # strokes; the reader loads in the prefetch thread
+        separated = ordered((lambda band=band: sep.convert(band))
+                            for band in self.source.bands(self.band_rows))
         for cmyk in prefetch(separated, depth=1):
             yield ht.process(cmyk)
 
@@ -305,10 +308,10 @@ class RipJob(PrintableJob):
                 yield pack_dots(band)
             return
         screen = OrderedScreen(self._separator(), Halftoner(s.dither, self.width, channels=4))
-        # three stages: libvips reads band k+2 while both cores screen band k+1 and
-        # the caller packs the strokes of band k
+        # the reader thread loads the next band while the band workers screen the ones
+        # before it, side by side, and the caller packs the strokes of the first
         loaded = prefetch(self.source.bands(self.band_rows), depth=1)
-        yield from prefetch((screen.process(band) for band in loaded), depth=1)
+        yield from ordered(screen.job(band) for band in loaded)
 
     def close(self) -> None:
         (self.layout or self.source).close()

@@ -117,13 +117,35 @@ def _ascii(text: str) -> str:
     return "".join(out)
 
 
+@kernel()
+def _nibble_rows(bits, spread, out):
+    """bits (h, 4, wb) -> out (h, n) bytes of the packed encoding, n <= 4 wb: the 8 dots of
+    plane byte xb are the 4 bytes from 4 xb, dot 0 in the high nibble (big-endian order).
+    A numba loop: numpy's four table look-ups over the band ran ~6x slower (fancy indexing
+    and the casts between uint8 and the table's uint32)."""
+    n = out.shape[1]
+    wb = bits.shape[2]
+    for i in range(bits.shape[0]):
+        for xb in range(wb):
+            w = (spread[bits[i, 0, xb]] | (spread[bits[i, 1, xb]] >> np.uint32(1))
+                 | (spread[bits[i, 2, xb]] >> np.uint32(2)) | (spread[bits[i, 3, xb]] >> np.uint32(3)))
+            o = 4 * xb
+            if o + 4 <= n:
+                out[i, o] = w >> np.uint32(24)
+                out[i, o + 1] = (w >> np.uint32(16)) & np.uint32(0xFF)
+                out[i, o + 2] = (w >> np.uint32(8)) & np.uint32(0xFF)
+                out[i, o + 3] = w & np.uint32(0xFF)
+            else:                                   # the row's last, partial word
+                for j in range(n - o):
+                    out[i, o + j] = (w >> np.uint32(24 - 8 * j)) & np.uint32(0xFF)
+
+
 def _bits_to_nibbles(bits: np.ndarray, width: int) -> np.ndarray:
     """(h, 4, ceil(W / 8)) plane bits -> (h, ceil(W / 2)) bytes of the packed encoding (each
     dot a nibble C M Y K, x = 0 in the first byte's high nibble)."""
-    s = _SPREAD
-    words = s[bits[:, 0]] | s[bits[:, 1]] >> np.uint32(1) | s[bits[:, 2]] >> np.uint32(2) \
-        | s[bits[:, 3]] >> np.uint32(3)
-    return words.astype(">u4").view(np.uint8).reshape(bits.shape[0], -1)[:, :-(-width // 2)]
+    out = np.empty((bits.shape[0], -(-width // 2)), np.uint8)
+    _nibble_rows(np.ascontiguousarray(bits), _SPREAD, out)
+    return out
 
 
 class PlanesWriter:

@@ -97,23 +97,31 @@ class OrderedScreen:
 
     def process(self, band: np.ndarray) -> np.ndarray:
         """band (h, width, channels) as from ImageSource.bands() -> (h, 4, wbytes) bits."""
+        return self.job(band)()
+
+    def job(self, band: np.ndarray):
+        """The band's screening as a callable returning its bits, the mask phase taken now:
+        bands' jobs may then run side by side in any order (rip/parallel.py `ordered`)."""
         sep = self.sep
         h = band.shape[0]
         if band.ndim < 2 or band.shape[1] != self.width:
             raise ValueError(f"band must be {self.width} px wide, got shape {band.shape}")
-        out = np.empty((h, 4, self.wbytes), np.uint8)
         row0 = self.row
-        if sep.mode == "lut3":
-            src = sep.check_band(band)
-            lut, post = sep.lut3_tables(), sep.post_tables()
-            kernel, args = _screen_lut3, lut + post
-        else:
-            # other colour modes: CMYK first, then screen
-            src = sep.convert(band).reshape(h, -1).view(np.uint32)
-            kernel, args = _screen_cmyk, ()
-        # rows split over the workers, at least 64 K pixels each
-        run_parallel(
-            (lambda a=a, b=b: kernel(src[a:b], *args, self.thr, row0 + a, out[a:b]))
-            for a, b in split(h, minimum=-(-65536 // self.width)))
         self.row = row0 + h
-        return out
+
+        def run() -> np.ndarray:
+            out = np.empty((h, 4, self.wbytes), np.uint8)
+            if sep.mode == "lut3":
+                src = sep.check_band(band)
+                kernel, args = _screen_lut3, sep.lut3_tables() + sep.post_tables()
+            else:
+                # other colour modes: CMYK first, then screen
+                src = sep.convert(band).reshape(h, -1).view(np.uint32)
+                kernel, args = _screen_cmyk, ()
+            # rows split over the workers (at least 64 K pixels each), unless this runs on
+            # a band worker
+            run_parallel(
+                (lambda a=a, b=b: kernel(src[a:b], *args, self.thr, row0 + a, out[a:b]))
+                for a, b in split(h, minimum=-(-65536 // self.width)))
+            return out
+        return run

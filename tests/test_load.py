@@ -745,3 +745,23 @@ def test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libv
         src = open_image(path)
         assert type(src._reader) is reader
         assert np.array_equal(np.concatenate(list(src.bands(64))), a)
+
+
+def test_uncompressed_strip_tiff_read_in_whole_bands_and_a_cut_file_named(tmp_path):
+    """Uncompressed strips are read a band at a time straight into the band's array (no
+    re-cutting copies): the bands are the file's rows, writable, and a file cut short fails
+    naming the file and the strip."""
+    a = np.random.default_rng(4).integers(0, 256, (300, 500, 3), dtype=np.uint8)
+    path = tmp_path / "plain.tif"
+    tifffile.imwrite(path, a, photometric="rgb", rowsperstrip=100)
+    src = open_image(path)
+    bands = list(src.bands(43))
+    assert [b.shape[0] for b in bands] == [43] * 6 + [42]
+    assert all(b.flags.writeable and b.flags.c_contiguous for b in bands)
+    assert np.array_equal(np.concatenate(bands), a)
+    cut = tmp_path / "cut.tif"
+    data = path.read_bytes()
+    page = tifffile.TiffFile(path).pages[0]
+    cut.write_bytes(data[:int(page.dataoffsets[2]) + 1000])      # strip 3 of 3 cut short
+    with pytest.raises(ImageError, match=r"cut.tif: truncated TIFF: strip 3 of 3 is cut short"):
+        list(open_image(cut).bands(43))

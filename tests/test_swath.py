@@ -195,3 +195,77 @@ def test_prefetch_starts_at_once_and_stops_when_closed_or_dropped():
             time.sleep(0.02)
         assert threads() == base
         assert len(made) <= 4                   # it stopped at its next item
+
+
+def test_ordered_runs_bands_side_by_side_in_order():
+    """rip/parallel.py `ordered`: whole bands on the band workers at once (not one band split
+    and waited for), results in the jobs' order however the jobs finish, a job's error at
+    its place, and `run_parallel` inside a band job runs there (a band worker that waited
+    for the shared pool could leave both cores idle, or deadlock a pool of busy workers)."""
+    import threading
+    import time
+
+    from wideprint.rip import parallel
+
+    if parallel.WORKERS < 2:
+        pytest.skip("one core: nothing runs side by side")
+    running, most = [0], [0]
+    lock = threading.Lock()
+
+    def job(i, delay, fail=False):
+        def run():
+            with lock:
+                running[0] += 1
+                most[0] = max(most[0], running[0])
+            time.sleep(delay)
+            inner = []
+            parallel.run_parallel(lambda k=k: inner.append(threading.current_thread().name)
+                                  for k in range(3))
+            with lock:
+                running[0] -= 1
+            if fail:
+                raise ValueError(f"band {i}")
+            return i, set(inner)
+        return run
+
+    # later jobs finish first: the order still holds
+    out = list(parallel.ordered(job(i, 0.05 * (4 - i)) for i in range(5)))
+    assert [i for i, _ in out] == [0, 1, 2, 3, 4]
+    assert most[0] == 2                         # two bands at a time, never more than cores
+    for _, names in out:                        # the inner jobs ran on the band's own thread
+        assert len(names) == 1 and next(iter(names)).startswith("wideprint-band")
+    got = []
+    with pytest.raises(ValueError, match="band 2"):
+        for i, _ in parallel.ordered(job(i, 0.01, fail=i == 2) for i in range(6)):
+            got.append(i)
+    assert got == [0, 1]
+    # outside a band worker run_parallel still uses the shared pool
+    names = []
+    parallel.run_parallel(lambda: (time.sleep(0.02), names.append(threading.current_thread().name))
+                          for _ in range(2))
+    assert all(n.startswith("wideprint-rip") for n in names)
+
+
+def test_nibble_rows_match_the_numpy_reference():
+    """rip/planes.py `_bits_to_nibbles` (a compiled loop) gives the packed encoding's bytes
+    of the plane bits exactly as the four table look-ups in numpy it replaced, at every
+    width (whole and partial last words)."""
+    from wideprint.rip import planes
+
+    def reference(bits, width):
+        s = planes._SPREAD
+        words = (s[bits[:, 0]] | s[bits[:, 1]] >> np.uint32(1) | s[bits[:, 2]] >> np.uint32(2)
+                 | s[bits[:, 3]] >> np.uint32(3))
+        return words.astype(">u4").view(np.uint8).reshape(bits.shape[0], -1)[:, :-(-width // 2)]
+
+    rng = np.random.default_rng(5)
+    for width in (1, 2, 3, 7, 8, 9, 15, 16, 17, 1023, 1024, 1031):
+        bits = rng.integers(0, 256, (5, 4, -(-width // 8)), dtype=np.uint8)
+        if width % 8:
+            bits[:, :, -1] &= np.uint8((0xFF << (8 - width % 8)) & 0xFF)
+        got = planes._bits_to_nibbles(bits, width)
+        assert got.shape == (5, -(-width // 2))
+        assert np.array_equal(got, reference(bits, width)), width
+        # and back: the nibbles unpack to the same dots as the bits
+        dots = np.unpackbits(got, axis=1, count=width * 4).reshape(5, width, 4)
+        assert np.array_equal(dots, np.unpackbits(bits, axis=2, count=width).transpose(0, 2, 1))
