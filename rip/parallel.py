@@ -31,11 +31,11 @@ def _band_worker() -> None:
     _HERE.inline = True
 
 
-def _pool(name: str, initializer=None) -> ThreadPoolExecutor:
+def _pool(name: str, initializer=None, workers: int = WORKERS) -> ThreadPoolExecutor:
     with _LOCK:
         pool, pid = _POOLS.get(name, (None, -1))
         if pool is None or pid != os.getpid():
-            pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix=name,
+            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name,
                                       initializer=initializer)
             _POOLS[name] = (pool, os.getpid())
         return pool
@@ -59,16 +59,18 @@ def run_parallel(jobs) -> None:
         f.result()
 
 
-def ordered(jobs: Iterator[Callable[[], T]], ahead: int = WORKERS + 1) -> Iterator[T]:
-    """Each job (a band's work; nothing shared with the other jobs) run on a band worker,
-    up to `ahead` at once, the results yielded in the jobs' order.  `jobs` is drawn here, in
-    the consumer's thread, one ahead of what the workers need.  Its own pool: the
-    halftoner's `run_parallel` jobs never queue behind separation bands."""
+def ordered(jobs: Iterator[Callable[[], T]], workers: int = WORKERS) -> Iterator[T]:
+    """Each job (a band's work; nothing shared with the other jobs) run on one of `workers`
+    band workers (1 beside a sequential stage that needs the other core), one more job
+    than workers submitted ahead, the results yielded in the jobs' order.  `jobs` is drawn
+    here, in the consumer's thread.  A pool of its own: the halftoner's `run_parallel` jobs
+    never queue behind separation bands."""
+    ahead = workers + 1
     pending: collections.deque = collections.deque()
-    workers = _pool("wideprint-band", _band_worker)
+    band_pool = _pool(f"wideprint-band{workers}", _band_worker, workers)
     try:
         for job in jobs:
-            pending.append(workers.submit(job))
+            pending.append(band_pool.submit(job))
             if len(pending) >= ahead:
                 yield pending.popleft().result()
         while pending:

@@ -234,6 +234,10 @@ def test_ordered_runs_bands_side_by_side_in_order():
     assert most[0] == 2                         # two bands at a time, never more than cores
     for _, names in out:                        # the inner jobs ran on the band's own thread
         assert len(names) == 1 and next(iter(names)).startswith("wideprint-band")
+    running[0] = most[0] = 0                    # one worker: one band at a time, in order
+    assert [i for i, _ in parallel.ordered((job(i, 0.01) for i in range(4)), workers=1)] == \
+        [0, 1, 2, 3]
+    assert most[0] == 1
     got = []
     with pytest.raises(ValueError, match="band 2"):
         for i, _ in parallel.ordered(job(i, 0.01, fail=i == 2) for i in range(6)):
