@@ -4,6 +4,13 @@ from pathlib import Path
 
 # Qt must never look for a display in the test run (PySide6 aborts without one).
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# the run's own cache (rip/color.py's LUTs): nothing read from or left in the user's ~/.cache
+if "WIDEPRINT_CACHE_DIR" not in os.environ:
+    import atexit
+    import shutil
+    import tempfile
+    os.environ["WIDEPRINT_CACHE_DIR"] = tempfile.mkdtemp(prefix="wideprint-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["WIDEPRINT_CACHE_DIR"], True)
 
 import numpy as np
 import pytest

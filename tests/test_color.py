@@ -332,3 +332,63 @@ def test_throughput_and_threads(capsys):
     for t in ts:
         t.join()
     np.testing.assert_array_equal(np.concatenate(res), s.convert(noise))
+
+
+# ------------------------------------------------------------------------------ the LUT cache
+
+
+def test_lut_cache_reads_back_the_same_lut_and_keys_on_what_makes_it(profiles, tmp_path, monkeypatch):
+    """rip/color.py keeps each transform's 3-D LUT between processes (docs/color.md "The LUT
+    cache"): the second Separator of a transform reads it instead of asking lcms, bit for
+    bit the same table; another intent, profile or profile content is another file; a
+    damaged file is made again; an empty WIDEPRINT_CACHE_DIR turns it off; a folder that
+    cannot be written is no error."""
+    from wideprint.rip import color
+    monkeypatch.setenv("WIDEPRINT_CACHE_DIR", str(tmp_path / "c"))
+    calls = []
+    real = color.Separator._lut_eval
+    monkeypatch.setattr(color.Separator, "_lut_eval",
+                        lambda self, grid, bands: calls.append(1) or real(self, grid, bands))
+    first = Separator("rgb")
+    files = sorted((tmp_path / "c" / "lut3").iterdir())
+    assert len(files) == 1 and len(calls) == 1
+    again = Separator("rgb")
+    assert len(calls) == 1                                  # read, not made
+    assert np.array_equal(first._lut, again._lut) and again._lut.dtype == np.uint64
+    band = RNG.integers(0, 256, (16, 64, 3), dtype=np.uint8)
+    assert np.array_equal(first.convert(band), again.convert(band))
+    Separator("rgb", intent="perceptual")
+    Separator("rgb", input_icc=profiles["p3"])
+    assert len(calls) == 3 and len(list((tmp_path / "c" / "lut3").iterdir())) == 3
+    # the same file name with other bytes is another transform
+    moved = tmp_path / "mine.icc"
+    moved.write_bytes(profiles["p3_bytes"])
+    Separator("rgb", input_icc=str(moved))
+    assert len(calls) == 3                                  # the same bytes: the same LUT
+    moved.write_bytes(profiles["srgb_bytes"])
+    Separator("rgb", input_icc=str(moved))
+    assert len(calls) == 4
+    # damaged: made again, and the file mended
+    files[0].write_bytes(b"\x93NUMPY not really")
+    mended = Separator("rgb")
+    assert len(calls) == 5 and np.array_equal(mended._lut, first._lut)
+    assert np.array_equal(np.load(files[0]), first._lut)
+    # bounded: the least recently used go (a read counts as a use)
+    monkeypatch.setattr(color, "LUT_CACHE_FILES", 3)
+    import os
+    for i, f in enumerate(sorted((tmp_path / "c" / "lut3").iterdir())):
+        os.utime(f, (1000 + i, 1000 + i))
+    Separator("rgb")                                        # the default's file: used now
+    Separator("rgb", intent="saturation")                   # a fifth transform: two go
+    left = {f.name for f in (tmp_path / "c" / "lut3").iterdir()}
+    assert len(left) == 3 and files[0].name in left
+    calls.clear()
+    Separator("rgb")
+    assert calls == []
+    # off, and unwritable
+    monkeypatch.setenv("WIDEPRINT_CACHE_DIR", "")
+    assert np.array_equal(Separator("rgb")._lut, first._lut) and len(calls) == 1
+    blocked = tmp_path / "file-not-folder"
+    blocked.write_text("x")
+    monkeypatch.setenv("WIDEPRINT_CACHE_DIR", str(blocked))
+    assert np.array_equal(Separator("rgb")._lut, first._lut) and len(calls) == 2

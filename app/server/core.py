@@ -574,6 +574,9 @@ def _version() -> str:
 def serve(config: ServerConfig, ready=None) -> int:
     """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next stroke
     boundary and resumed by the next start."""
+    # the colour transforms' cache (rip/color.py) in the state directory: what clients send
+    # (embedded profiles) makes files there, never in the service user's home
+    os.environ.setdefault("WIDEPRINT_CACHE_DIR", str(Path(config.state_dir) / "cache"))
     server = PrintServer(config)
     server.start()
 
