@@ -779,22 +779,32 @@ def _one_blas_thread() -> None:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
+_collector_was_off = False
+
+
 def _collector_off() -> None:
     """Start-up makes ~30,000 container objects that live as long as the process (modules,
     classes, functions, the parser), and Python's cyclic garbage collector walks the young
     ones every 700 allocations and all of them at each full collection during the imports:
     25-30 ms of a tiny `rip`'s 0.23 s (median of 15).  Off until the command's modules are
-    imported (`_collector_on`)."""
+    imported (`_collector_on`).  Only when `wideprint` is the process (main() without
+    argv): a caller's own process keeps its collector as it is."""
+    global _collector_was_off
     import gc
-    gc.disable()
+    if gc.isenabled():
+        gc.disable()
+        _collector_was_off = True
 
 
 def _collector_on() -> None:
     """The objects made so far frozen (never walked again, since they are never garbage)
     and the collector back on for the job's own."""
-    import gc
-    gc.freeze()
-    gc.enable()
+    global _collector_was_off
+    if _collector_was_off:
+        import gc
+        gc.freeze()
+        gc.enable()
+        _collector_was_off = False
 
 
 # the commands that turn the collector back on themselves, once their modules are imported
@@ -803,7 +813,8 @@ _QUICK_START = ("print", "rip")
 
 def main(argv: list[str] | None = None) -> int:
     _one_blas_thread()
-    _collector_off()
+    if argv is None:                # the `wideprint` command itself
+        _collector_off()
     ap = build_parser()
     args = ap.parse_args(argv)
     if args.command not in _QUICK_START:

@@ -108,10 +108,15 @@ def test_rip_writes_the_same_dots_in_either_encoding(tmp_path, capsys, dither):
     img = tmp_path / "in.tif"
     tifffile.imwrite(img, rng.integers(0, 256, (150, 333, 3), dtype=np.uint8), photometric="rgb")
     said = {}
+    import gc
+    frozen = gc.get_freeze_count()
     for fmt in ("8bit", "packed"):
         assert cli.main(["rip", str(img), "-o", str(tmp_path / f"{fmt}.tif"), "--dither", dither,
                          "--size", "pixels", "--planes-format", fmt]) == 0
         said[fmt] = capsys.readouterr().out.split("drops")[1]
+        # main() called in a process of the caller's leaves its garbage collector alone
+        # (only the `wideprint` command's own process starts with it off: app/cli.py)
+        assert gc.isenabled() and gc.get_freeze_count() == frozen
     assert planes_format(tmp_path / "packed.tif") == "packed"
     assert said["8bit"] == said["packed"]
     assert np.array_equal(read_planes(tmp_path / "8bit.tif"), read_planes(tmp_path / "packed.tif"))
