@@ -636,8 +636,11 @@ class Separator:
         if folder is None:
             return None
         h = hashlib.sha256()
-        for prof in (self.input_profile, self.output_profile):
-            h.update(prof.identity())
+        try:
+            for prof in (self.input_profile, self.output_profile):
+                h.update(prof.identity())
+        except OSError:                 # a profile file gone since it was checked: no cache
+            return None
         pv = _vips()          # its LittleCMS makes the values
         h.update(f"|{self.intent}|{self.bpc}|{LUT3_SIZE}|{LANE_SCALE}|{LUT_CACHE_VERSION}|libvips "
                  f"{pv.version(0)}.{pv.version(1)}.{pv.version(2)}".encode())

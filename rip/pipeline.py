@@ -279,14 +279,17 @@ class RipJob(PrintableJob):
             return
         sep = self._separator()
         ht = Halftoner(self.settings.dither, self.width, channels=4)
-        # one band worker separates the next bands while this thread diffuses this one
+        # one band worker separates the next bands while the diffusion works on this one
         # (band after band, the longest stage: it needs the other core to itself; with two
         # separating side by side, in-process fs took 0.63 s instead of 0.55, median of 7
-        # pairs) and the caller packs its strokes; the reader loads in the prefetch thread
+        # pairs); the reader loads in the separation's prefetch thread
         separated = ordered(((lambda band=band: sep.convert(band))
                              for band in self.source.bands(self.band_rows)), workers=1)
-        for cmyk in prefetch(separated, depth=1):
-            yield ht.process(cmyk)
+        # the diffusion in a thread of its own, so that the caller's packing and stroke
+        # planning of a band overlap the diffusion of the next (in-process fs 0.45 -> 0.43 s,
+        # vced 0.60 -> 0.57 s, median of 7 and 5 pairs; print --bidir 1.48 -> 1.43 s)
+        diffused = (ht.process(cmyk) for cmyk in prefetch(separated, depth=1))
+        yield from prefetch(diffused, depth=1)
 
     def packed_native(self) -> bool:
         if self._dead_rows() is not None:
