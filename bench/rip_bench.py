@@ -785,8 +785,8 @@ def big(d: str, warm: str | None) -> None:
 def profile(method: str, w: int, h: int) -> None:
     """Stage times of one RIP (load, separation, halftone, the fused ordered screen, swath
     packing) measured by timing each stage's calls, then cProfile's top functions.  The
-    stages run in three threads at once (docs/rip.md), so their times overlap and can add up
-    to more than the total."""
+    stages run in several threads at once (docs/rip.md "Threads"), so their times overlap and
+    can add up to more than the total."""
     import cProfile
     import pstats
 
@@ -848,7 +848,8 @@ def profile(method: str, w: int, h: int) -> None:
         print(f"wideprint {method}, {w} x {h} RGB ({mpx:.1f} Mpx): {total:.2f} s = {mpx / total:.1f} Mpx/s")
         for k, v in stage.items():
             print(f"  {k:11s} {v:7.2f} s  {100 * v / total:5.1f} %   ({mpx / v if v else float('inf'):8.1f} Mpx/s alone)")
-        print("  (the stages overlap: load, screening or separation, and packing run in three threads)")
+        print("  (the stages overlap: load, separation or screening, diffusion and packing run in "
+              "threads of their own)")
         print()
         pr = cProfile.Profile()
         pr.enable()
