@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 from .compiled import kernel
+from .halftone import _end_row, _rows4, _serpentine
 
 __all__ = ["OSTROMOUKHOV", "ZHOU_FANG_KEYS", "ZHOU_FANG_STRENGTH", "TUNED_STRENGTH", "UNIT",
            "WEIGHT_BITS", "MODULATION", "NEXT_BOOST", "VCDiffuser", "coefficient_table",
@@ -321,7 +322,6 @@ def _pair_decide(la, lb, va, vb, ta, tb, t, split):
 def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa, oya, oxb, oyb, lim):  # pragma: no cover
     rows, width = src.shape[0], src.shape[1]
     ch = np.uint64(src.shape[2])
-    u1, u2 = np.uint64(1), np.uint64(2)
     cau, cbu = np.uint64(ca), np.uint64(cb)
     nm = np.uint64(noise.shape[0] - 1)
     oxau, oxbu = np.uint64(oxa), np.uint64(oxb)
@@ -342,12 +342,7 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa,
         pendb = 0
         fwd = (r & 1) == 0
         for k in range(width):
-            if fwd:
-                x = np.uint64(k)
-            else:
-                x = np.uint64(width - 1 - k)
-            p = x + u2
-            q = p - u1 if fwd else p + u1   # the row-below cell behind this pixel
+            x, p, q = _serpentine(k, width, fwd)
             o = x * ch
             la = srow[o + cau]
             lb = srow[o + cbu]
@@ -389,14 +384,8 @@ def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa,
             nxtb[q] = pendb + edlb
             penda = va - ena - edla
             pendb = vb - enb - edlb
-        if fwd:
-            nxta[width + 1] = penda
-            nxtb[width + 1] = pendb
-        else:
-            nxta[2] = penda
-            nxtb[2] = pendb
-        cura[:] = 0
-        curb[:] = 0
+        _end_row(cura, nxta, penda, width, fwd)
+        _end_row(curb, nxtb, pendb, width, fwd)
 
 
 @kernel(inline="always")
@@ -414,11 +403,10 @@ def _step(lvl, a, nz, tab):
 @kernel()
 def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):  # pragma: no cover
     """Two inks diffused independently in one loop (their dependency chains overlap); the
-    same arithmetic as ``_vc_plane``, one explicit loop per direction.  src/dst must be
+    same arithmetic as ``_vc_plane``, scanned through ``_serpentine``.  src/dst must be
     C-contiguous; the indices are unsigned (numba checks signed ones for wrap-around)."""
     rows, width = src.shape[0], src.shape[1]
     ch = np.uint64(src.shape[2])
-    u1, u2 = np.uint64(1), np.uint64(2)
     cau, cbu = np.uint64(ca), np.uint64(cb)
     nm = np.uint64(noise.shape[0] - 1)
     oxau, oxbu = np.uint64(oxa), np.uint64(oxb)
@@ -438,11 +426,7 @@ def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):
         pb = 0
         fwd = (r & 1) == 0
         for k in range(width):
-            if fwd:
-                x = np.uint64(k)
-            else:
-                x = np.uint64(width - 1 - k)
-            p = x + u2
+            x, p, q = _serpentine(k, width, fwd)
             o = x * ch
             da, ena, edla, eda = _step(srow[o + cau], cura[p] + ca_, nra[(x + oxau) & nm], tab)
             db, enb, edlb, edb = _step(srow[o + cbu], curb[p] + cb_, nrb[(x + oxbu) & nm], tab)
@@ -450,19 +434,12 @@ def _vc_two(src, dst, ca, cb, erra, errb, row0, tab, noise, oxa, oya, oxb, oyb):
             drow[o + cbu] = db
             ca_ = ena
             cb_ = enb
-            q = p - u1 if fwd else p + u1      # the row-below cell behind this pixel
             nxta[q] = pa + edla
             nxtb[q] = pb + edlb
             pa = eda
             pb = edb
-        if fwd:
-            nxta[width + 1] = pa
-            nxtb[width + 1] = pb
-        else:
-            nxta[2] = pa
-            nxtb[2] = pb
-        cura[:] = 0
-        curb[:] = 0
+        _end_row(cura, nxta, pa, width, fwd)
+        _end_row(curb, nxtb, pb, width, fwd)
 
 
 @kernel()
@@ -480,10 +457,7 @@ def vc_four(src, dst, err, row0, tab, noise, offs):  # pragma: no cover - compil
         r = row0 + i
         srow = src[i].reshape(-1)
         drow = dst[i].reshape(-1)
-        c0, n0 = err[0, r & 1], err[0, (r + 1) & 1]
-        c1, n1 = err[1, r & 1], err[1, (r + 1) & 1]
-        c2, n2 = err[2, r & 1], err[2, (r + 1) & 1]
-        c3, n3 = err[3, r & 1], err[3, (r + 1) & 1]
+        c0, n0, c1, n1, c2, n2, c3, n3 = _rows4(err, r)
         z0 = noise[(r + offs[0, 1]) & m]
         z1 = noise[(r + offs[1, 1]) & m]
         z2 = noise[(r + offs[2, 1]) & m]
@@ -492,11 +466,7 @@ def vc_four(src, dst, err, row0, tab, noise, offs):  # pragma: no cover - compil
         p0 = p1 = p2 = p3 = 0       # the row below: the cell under this pixel, so far
         fwd = (r & 1) == 0
         for k in range(width):
-            if fwd:
-                x = np.uint64(k)
-            else:
-                x = np.uint64(width - 1 - k)
-            p = x + u2
+            x, p, q = _serpentine(k, width, fwd)
             o = x * u4
             d0, e0, l0, w0 = _step(srow[o], c0[p] + k0, z0[(x + x0) & nm], tab)
             d1, e1, l1, w1 = _step(srow[o + u1], c1[p] + k1, z1[(x + x1) & nm], tab)
@@ -507,21 +477,15 @@ def vc_four(src, dst, err, row0, tab, noise, offs):  # pragma: no cover - compil
             drow[o + u2] = d2
             drow[o + u3] = d3
             k0, k1, k2, k3 = e0, e1, e2, e3
-            q = p - u1 if fwd else p + u1      # the row-below cell behind this pixel
             n0[q] = p0 + l0
             n1[q] = p1 + l1
             n2[q] = p2 + l2
             n3[q] = p3 + l3
             p0, p1, p2, p3 = w0, w1, w2, w3
-        end = width + 1 if fwd else 2
-        n0[end] = p0
-        n1[end] = p1
-        n2[end] = p2
-        n3[end] = p3
-        c0[:] = 0
-        c1[:] = 0
-        c2[:] = 0
-        c3[:] = 0
+        _end_row(c0, n0, p0, width, fwd)
+        _end_row(c1, n1, p1, width, fwd)
+        _end_row(c2, n2, p2, width, fwd)
+        _end_row(c3, n3, p3, width, fwd)
 
 
 @kernel()

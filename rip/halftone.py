@@ -162,6 +162,35 @@ def _fs_step(lvl, a):
     return dot, e * 7 + (v - (e << 4)), e
 
 
+@kernel(inline="always")
+def _serpentine(k, width, fwd):
+    """Pixel k of a serpentine row (left to right when `fwd`, else right to left) -> (x, p,
+    q), unsigned: its column, its cell in the error rows (x + _PAD) and the row-below cell
+    behind it, where the down-behind share goes.  The one-loop kernels here and in
+    rip/diffusion.py scan through it (unsigned indices spare numba's wrap-around checks)."""
+    if fwd:
+        x = np.uint64(k)
+        return x, x + np.uint64(2), x + np.uint64(1)
+    x = np.uint64(width - 1 - k)
+    return x, x + np.uint64(2), x + np.uint64(3)
+
+
+@kernel(inline="always")
+def _rows4(err, r):
+    """The four inks' error rows (err (4, 2, width + 4)) for image row r: this row's and the
+    next one's, ink after ink: (c0, n0, c1, n1, c2, n2, c3, n3)."""
+    a, b = r & 1, (r + 1) & 1
+    return err[0, a], err[0, b], err[1, a], err[1, b], err[2, a], err[2, b], err[3, a], err[3, b]
+
+
+@kernel(inline="always")
+def _end_row(cur, nxt, pending, width, fwd):
+    """A serpentine row's end, one ink: the row-below cell under its last pixel takes what
+    is pending for it, and the row's own error cells are cleared for the row two on."""
+    nxt[width + 1 if fwd else 2] = pending
+    cur[:] = 0
+
+
 @kernel()
 def _fs_plane(src, dst, err, row0):  # pragma: no cover - compiled
     """Floyd-Steinberg, serpentine, integer.  src/dst: (rows, width) uint8 views,
@@ -227,11 +256,8 @@ def _fs_two(src3, dst3, err3, row0, c):  # pragma: no cover - compiled
             s1b = s0b + 5 * f
             s0a = e
             s0b = f
-        end = width + 1 if d == 1 else 2
-        nxta[end] = s1a
-        nxtb[end] = s1b
-        cura[:] = 0
-        curb[:] = 0
+        _end_row(cura, nxta, s1a, width, d == 1)
+        _end_row(curb, nxtb, s1b, width, d == 1)
 
 
 @kernel()
@@ -247,20 +273,13 @@ def _fs_four(src3, dst3, err3, row0):  # pragma: no cover - compiled
         r = row0 + i
         srow = src3[i].reshape(-1)
         drow = dst3[i].reshape(-1)
-        c0, n0 = err3[0, r & 1], err3[0, (r + 1) & 1]
-        c1, n1 = err3[1, r & 1], err3[1, (r + 1) & 1]
-        c2, n2 = err3[2, r & 1], err3[2, (r + 1) & 1]
-        c3, n3 = err3[3, r & 1], err3[3, (r + 1) & 1]
+        c0, n0, c1, n1, c2, n2, c3, n3 = _rows4(err3, r)
         k0 = k1 = k2 = k3 = 0
         s10 = s11 = s12 = s13 = 0
         s00 = s01 = s02 = s03 = 0
         fwd = (r & 1) == 0
         for k in range(width):
-            if fwd:
-                x = np.uint64(k)
-            else:
-                x = np.uint64(width - 1 - k)
-            p = x + u2
+            x, p, q = _serpentine(k, width, fwd)
             o = x * u4
             d0, k0, e0 = _fs_step(srow[o], c0[p] + k0)
             d1, k1, e1 = _fs_step(srow[o + u1], c1[p] + k1)
@@ -270,22 +289,16 @@ def _fs_four(src3, dst3, err3, row0):  # pragma: no cover - compiled
             drow[o + u1] = d1
             drow[o + u2] = d2
             drow[o + u3] = d3
-            q = p - u1 if fwd else p + u1
             n0[q] = s10 + 3 * e0
             n1[q] = s11 + 3 * e1
             n2[q] = s12 + 3 * e2
             n3[q] = s13 + 3 * e3
             s10, s11, s12, s13 = s00 + 5 * e0, s01 + 5 * e1, s02 + 5 * e2, s03 + 5 * e3
             s00, s01, s02, s03 = e0, e1, e2, e3
-        end = width + 1 if fwd else 2
-        n0[end] = s10
-        n1[end] = s11
-        n2[end] = s12
-        n3[end] = s13
-        c0[:] = 0
-        c1[:] = 0
-        c2[:] = 0
-        c3[:] = 0
+        _end_row(c0, n0, s10, width, fwd)
+        _end_row(c1, n1, s11, width, fwd)
+        _end_row(c2, n2, s12, width, fwd)
+        _end_row(c3, n3, s13, width, fwd)
 
 
 @kernel()
