@@ -374,21 +374,16 @@ def _read_lut(path: str | None, size: int) -> np.ndarray | None:
 
 
 def _write_lut(path: str | None, lut: np.ndarray) -> None:
-    """Kept for the next process: written whole under a temporary name, then renamed, so a
-    reader never sees half a file; a cache that cannot be written is no error."""
+    """Kept for the next process: written whole under a temporary name, then renamed
+    (rip/planes.py `output_file`, as every output file), so a reader never sees half a
+    file; a cache that cannot be written is no error."""
     if path is None:
         return
-    import tempfile
+    from .planes import output_file
     try:
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, lut, allow_pickle=False)
-            os.replace(tmp, path)
-        except BaseException:
-            os.unlink(tmp)
-            raise
+        with output_file(path) as tmp, open(tmp, "wb") as f:
+            np.save(f, lut, allow_pickle=False)
         _trim(os.path.dirname(path))
     except OSError as exc:
         log.debug("LUT cache not written (%s): %s", path, exc)
