@@ -619,9 +619,12 @@ def add_parser(sub) -> None:
                    help="address of the API (default 127.0.0.1; anything else exposes it)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT,
                    help=f"API port (default {DEFAULT_PORT}; 0 = any free port)")
-    p.add_argument("--on-crash", choices=("resume", "hold"), default="resume",
+    p.add_argument("--on-crash", choices=("resume", "hold", "reprint"), default="resume",
                    help="a job that was printing when the server died: resume it at its "
-                        "first unfinished stroke (default), or hold it for the operator")
+                        "first unfinished stroke once the printer confirms the sheet holds "
+                        "the strokes before it, else hold it (resume, the default); always "
+                        "hold it (hold); resume it when confirmed, else print it again from "
+                        "its first stroke (reprint). docs/server.md 'Crash recovery'")
     p.add_argument("--max-file-size", type=int, metavar="BYTES",
                    help="largest file accepted (default 4 GiB)")
     p.add_argument("--scan-interval", type=float, default=1.0, metavar="S",

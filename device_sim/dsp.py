@@ -288,3 +288,9 @@ class Dsp:
     @handles(P.Op.SERVICE_STATUS)
     def service_status(self):
         return self.printer.service.status()
+
+    @handles(P.Op.JOB_STATUS)
+    def job_status(self):
+        """The printer's account of its job (docs/protocol.md 2.10); answered whatever the
+        printer's state, a latched fault included: it moves nothing."""
+        return dict(boot=self.printer.boot, **self.printer.job_account)

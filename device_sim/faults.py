@@ -42,6 +42,8 @@ KINDS = {
     "dry-nozzle": "HEAD:NOZZLE that has dried (misfires until spat or purged; repeatable)",
     "clogged-nozzle": "HEAD:NOZZLE that has clogged (misfires until purged; repeatable)",
     "seed": "random seed for the injected faults and the scanner's noise",
+    "boot": "the power-up number JOB_STATUS reports (default: drawn at random at power-up; "
+            "docs/protocol.md 2.10)",
 }
 
 UNITS = ("um", "mm", "col", "row")
@@ -117,6 +119,7 @@ class Faults:
     dry_nozzle: list = field(default_factory=list)       # [(head name, nozzle)]
     clogged_nozzle: list = field(default_factory=list)   # [(head name, nozzle)]
     seed: int = 1
+    boot: int | None = None                              # power-up number (None: random)
 
     @classmethod
     def parse(cls, items: list[str] | None) -> "Faults":
@@ -169,7 +172,7 @@ class Faults:
                     n, sec = value.split(":")
                     f.pci_bus_stall = (int(n), float(sec))
                 elif attr in ("pci_desc_error", "pci_dma_abort", "data_drop_after", "limit_at", "fifo_words", "encoder_glitch_at",
-                              "seed", "starve_guard"):
+                              "seed", "starve_guard", "boot"):
                     setattr(f, attr, int(float(value)))
                 else:
                     setattr(f, attr, float(value))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import random
 import time as wallclock
 from collections import deque
@@ -47,7 +48,9 @@ class Printer:
                  vcd_window: tuple[int, int, int, int] = (0, 0, 0, 8),
                  record_latched: bool = False,
                  scan_path: str | Callable[[int], str | None] | None = None,
-                 scan_dpi: float = 1200):
+                 scan_dpi: float = 1200,
+                 spectro_path: str | Callable[[int], str | None] | None = None,
+                 spectro_dpi: float = 50):
         self.profile = profile or load_profile()
         self.faults = faults or Faults()
         prof = self.profile
@@ -64,7 +67,8 @@ class Printer:
         self.physical = PhysicalModel(prof, self.faults)
         self.geometry: JobGeometry | None = None
         self.scan_path, self.scan_dpi = scan_path, scan_dpi
-        self.scanner = None
+        self.spectro_path, self.spectro_dpi = spectro_path, spectro_dpi
+        self.scanner = None                  # the job's instruments (device_sim/spectro.py)
         self.scans: dict = {}                # scan path -> its closed Scanner
         self.paper_extra_nm = 0.0            # the paper's travel beyond its steps (feed-error)
         self._extra0 = 0.0                   # ... at the open job's JOB_BEGIN
@@ -104,6 +108,12 @@ class Printer:
         self._move_times: list[float] = []
         self.blocks_total = 0
         self.job: dict | None = None
+        # the printer's account of its job (docs/protocol.md 2.10): what JOB_STATUS reports
+        self.boot = self.faults.boot if self.faults.boot is not None else \
+            int.from_bytes(os.urandom(4), "little") % 0xFFFFFFFF + 1
+        self.job_account = dict(job=P.NO_JOB, job_state=P.JobState.NONE, lines_done=0,
+                                last_stroke=P.NO_STROKE)
+        self._line_counted = None            # the line run last counted in lines_done
         self.media: Media | None = None
         self.media_path = media_path
         self.jobs_done: dict[int, dict] = {}
@@ -491,8 +501,14 @@ class Printer:
         self.position = counter_position + self.count_offset
         self.time = max(self.time, t)
         self.motion = P.Motion.IDLE
-        if self.line is not None and self.line.fault == P.Fault.NONE:
+        line = self.line
+        if line is not None and line.fault == P.Fault.NONE:
             self.line_done = True
+            if line is not self._line_counted and self.job is not None and \
+                    self.fpga.fired == line.n:
+                self._line_counted = line        # a whole line of the open job (2.10)
+                self.job_account.update(lines_done=self.job_account["lines_done"] + 1,
+                                        last_stroke=line.stroke)
         self.fpga.firing = False
 
     # -- heads and media ------------------------------------------------------------------------
@@ -531,6 +547,8 @@ class Printer:
         self._close_scan()
         self.job = dict(job=job, x0=x0, width=width, height=height, dpi=dpi, row_nm=row_nm,
                         y0=y0, paper0=self.paper_steps, k=self.profile.counts_per_inch // dpi)
+        self.job_account = dict(job=job, job_state=P.JobState.OPEN, lines_done=0,
+                                last_stroke=P.NO_STROKE)
         self._extra0 = self.paper_extra_nm
         path = self.media_path(job) if callable(self.media_path) else self.media_path
         geo = self.geometry = self.physical.job_geometry(x0, self.job["k"], y0, row_nm, width, height)
@@ -543,11 +561,13 @@ class Printer:
                            window_rows=self.profile.swath_rows + MEDIA_MARGIN_ROWS
                            + int(self._y_slack_nm // row_nm), path=path)
         scan = self.scan_path(job) if callable(self.scan_path) else self.scan_path
-        if scan:
-            from .scanner import Scanner
-            self.scanner = Scanner(scan, geo, self.scan_dpi, dot_diameter_um(self.profile, self.faults),
-                                   self.faults, slack_um=self._y_slack_nm / 1000,
-                                   swath_um=self.profile.swath_rows * row_nm / 1000)
+        spectro = self.spectro_path(job) if callable(self.spectro_path) else self.spectro_path
+        if scan or spectro:
+            from .spectro import open_instruments
+            self.scanner = open_instruments(
+                self.profile, self.faults, geo, dot_diameter_um(self.profile, self.faults),
+                scan and (scan, self.scan_dpi), spectro and (spectro, self.spectro_dpi),
+                slack_um=self._y_slack_nm / 1000, swath_um=self.profile.swath_rows * row_nm / 1000)
         self.log("job_begin", **self.job)
 
     def job_end(self, job: int) -> None:
@@ -566,6 +586,8 @@ class Printer:
             self._close_scan()
             self.jobs_done[job] = stats
             self.log("job_end", job=job, **stats)
+        if self.job is not None and self.job["job"] == job:
+            self.job_account["job_state"] = P.JobState.ENDED
         self.media = None
         self.job = None
 
@@ -578,6 +600,8 @@ class Printer:
             self.media.close()
             self.log("job_abandoned", job=self.job["job"] if self.job else None,
                      drops=[int(d) for d in self.media.drops])
+        if self.job is not None:
+            self.job_account["job_state"] = P.JobState.ENDED
         self.media = None
         self.job = None
 
@@ -591,8 +615,9 @@ class Printer:
     def _close_scan(self) -> None:
         if self.scanner is not None:
             self.scanner.close()
-            self.log("scan", path=self.scanner.path, dpi=self.scanner.dpi,
-                     drops=self.scanner.drops, late=self.scanner.late)
+            for inst in getattr(self.scanner, "instruments", (self.scanner,)):
+                self.log(getattr(inst, "event", "scan"), path=inst.path, dpi=inst.dpi,
+                         drops=inst.drops, late=inst.late)
             self.scans[self.scanner.path] = self.scanner       # closed: its geometry, for tests
             self.scanner = None
 

@@ -108,6 +108,17 @@ class JobError(RuntimeError):
         self.fault, self.stroke = fault, stroke
 
 
+class ResumeRefused(JobError):
+    """The printer cannot confirm that the sheet holds what a checkpoint says (restarted,
+    another job, or it cannot tell: docs/protocol.md 2.10), so the job must not go on
+    from there.  `on_sheet` strokes of `total` were confirmed before; the caller holds the
+    job or prints it again from its first stroke (docs/server.md "Crash recovery")."""
+
+    def __init__(self, message: str, on_sheet: int, total: int):
+        super().__init__(message)
+        self.on_sheet, self.total = on_sheet, total
+
+
 @dataclass
 class JobReport:
     file: str
@@ -316,6 +327,7 @@ class PrintJob:
                 if data or not getattr(self.dev.data, "open", True):
                     self.dev.data.reconnect()
                 self.dev.connect()
+                self._same_printer()
                 return
             except (LinkError, OSError) as exc:
                 if isinstance(exc, LineTooNoisy):
@@ -414,6 +426,58 @@ class PrintJob:
                 # interpreter from the streaming thread that drives it
                 streamer.wait(max(self.poll_interval, STREAMING_POLL_S))
 
+    # -- resuming: what the printer must confirm (docs/protocol.md 2.10) -------------------------
+    def confirm_resume(self, total: int) -> str:
+        """Whether this job may go on from its checkpoint: "open" (the printer holds the
+        job, on the sheet as the checkpoint says, or one stroke further) or "ended" (the
+        printer ended it after every stroke: the copy is complete).  Raises ResumeRefused
+        otherwise, saying how many strokes the sheet holds."""
+        cp = self.resume
+        n, lines = resume_stroke(cp), int(cp.get("lines", -1))
+        on_sheet = f"{n} of {total} strokes are on the sheet"
+
+        def refuse(why: str):
+            raise ResumeRefused(f"{why}: {on_sheet}", n, total)
+
+        js = self.printer.job_status()
+        if js is None:
+            info = self.dev.info or {}
+            refuse(f"the printer cannot confirm its job (protocol {info.get('proto_major')}."
+                   f"{info.get('proto_minor')} has no JOB_STATUS)")
+        if cp.get("boot") is None or lines < 0:
+            refuse("the checkpoint does not say which power-up of the printer it was made on")
+        if js.boot != cp["boot"]:
+            refuse("the printer was restarted")
+        if js.job != self.job_id or js.job_state == P.JobState.NONE:
+            refuse(f"the printer holds another job ({'none' if js.job == P.NO_JOB else js.job})")
+        last = n - 1 if n > 0 else P.NO_STROKE
+        if js.job_state == P.JobState.ENDED:
+            if n >= total and js.lines_done == lines:
+                return "ended"
+            refuse(f"the printer ended the job after {js.lines_done} lines")
+        if js.lines_done == lines and (js.last_stroke == last or lines == 0):
+            return "open"
+        if js.lines_done == lines + 1 and js.last_stroke != P.NO_STROKE and \
+                (js.last_stroke >= n or n == 0):
+            return "open"                 # the stroke in flight finished after the checkpoint
+        refuse(f"the printer has {js.lines_done} lines of the job (last stroke "
+               f"{'none' if js.last_stroke == P.NO_STROKE else js.last_stroke}), the checkpoint "
+               f"{lines}")
+
+    def _same_printer(self) -> None:
+        """After a reconnection inside the job: the printer must be the one that has the
+        job's beginning (same power-up, docs/protocol.md 2.10); printing the rest onto a
+        restarted printer's sheet would be a print without its beginning."""
+        boot = self.checkpoint.get("boot")
+        if boot is None:
+            return
+        js = self.printer.job_status()
+        if js is not None and js.boot != boot:
+            n = int(self.checkpoint.get("next_stroke", 0))
+            total = self.report.strokes_total
+            raise ResumeRefused(f"the printer was restarted during the job: {n} of {total} "
+                                f"strokes are on the sheet", n, total)
+
     # -- the whole job -------------------------------------------------------------------------
     def run(self) -> JobReport:
         t0 = time.monotonic()
@@ -431,6 +495,22 @@ class PrintJob:
             # printer is connected, homed and the job placed (a full-width job's first stroke
             # takes ~0.2 s to RIP; the printer's readiness as long again)
             strokes = prefetch(rip.strokes(planner), depth=2)
+            rep.strokes_total = self.telemetry.strokes_total = planner.total_strokes
+            resumed = None
+            if self.resume and self.resume.get("ended"):
+                resumed = "ended"                # JOB_END was confirmed: the copy is complete
+            elif self.resume:
+                self._state("connecting", "confirming the printer's job")
+                self._recovering(self.printer.connect, "connecting")
+                try:
+                    resumed = self._recovering(
+                        lambda: self.confirm_resume(planner.total_strokes),
+                        "confirming the printer's job")
+                except ResumeRefused as exc:
+                    self._count_on_sheet(strokes, exc.on_sheet)
+                    raise
+            if resumed == "ended":
+                return self._counted_only(strokes)
             self._state("connecting")
             self._recovering(self.prepare, "connecting")
             if self.care is None:
@@ -439,7 +519,6 @@ class PrintJob:
             self._read_head_temps()
             self._state("printing")
             x0 = self.resume["x0"] if self.resume else self._recovering(self.place, "placing the job")
-            rep.strokes_total = self.telemetry.strokes_total = planner.total_strokes
             link = self.dev.link
             top = self.top_rows()                # the top margin: image row 0 that much later
             begin = dict(job=self.job_id, x0=x0, width=rip.width, height=rip.height,
@@ -449,7 +528,11 @@ class PrintJob:
             paper0 = self.resume["paper0"] if self.resume else self._recovering(
                 lambda: link.status().paper_steps, "reading the paper position")
             next_stroke = resume_stroke(self.resume) if self.resume else 0
-            self._checkpoint(x0=x0, paper0=paper0, next_stroke=next_stroke)
+            # the printer's power-up this job's strokes land in (docs/protocol.md 2.10)
+            js = self._recovering(self.printer.job_status, "reading the printer's job")
+            self._checkpoint(x0=x0, paper0=paper0, next_stroke=next_stroke,
+                             boot=None if js is None else js.boot,
+                             lines=int(self.resume.get("lines", 0)) if self.resume else 0)
             top0 = planner.top_row(0) - top
             for stroke in strokes:
                 if stroke.index < next_stroke:       # printed before the interruption
@@ -471,7 +554,7 @@ class PrintJob:
                 self.care.after_stroke(used, wet)
                 rep.strokes_printed += 1
                 self.telemetry.strokes_printed = rep.strokes_printed
-                self._checkpoint(next_stroke=stroke.index + 1)
+                self._checkpoint(next_stroke=stroke.index + 1, lines=rep.strokes_printed)
                 self._read_head_temps()
                 for c in range(4):
                     rep.drops[c] += int(stroke.dots[c])
@@ -481,10 +564,15 @@ class PrintJob:
             self._recovering(lambda: self.feed_to(out), "feeding the job out")
             self._recovering(lambda: link.call(P.Op.JOB_END, job=self.job_id),
                              "ending the job")
+            self._checkpoint(ended=True)         # the copy is complete on the sheet
             self._recovering(lambda: self._command(lambda: self.printer.park(wait=False)), "parking")
             rep.strokes_skipped = rep.strokes_total - rep.strokes_printed
             rep.state = "done"
             self._state("done")
+        except ResumeRefused as exc:
+            rep.state, rep.message = "failed", str(exc)
+            self._state("failed", rep.message)
+            raise
         except JobCancelled as exc:
             rep.state, rep.message = "cancelled", str(exc)
             self._safe_stop()
@@ -508,6 +596,30 @@ class PrintJob:
             k = prof.k(rip.settings.dpi)
             rep.area_m2 = (rip.width * k / prof.counts_per_inch * 0.0254) * \
                 (rip.height * prof.row_um * 1e-6)
+        return rep
+
+    def _count_on_sheet(self, strokes, n: int) -> None:
+        """The report of a job that stops before printing: the strokes before `n` (those
+        the checkpoint says are on the sheet) and their drops, for the accounting."""
+        rep = self.report
+        for stroke in strokes:
+            if stroke.index >= n:
+                break
+            rep.strokes_printed += 1
+            for c in range(4):
+                rep.drops[c] += int(stroke.dots[c])
+
+    def _counted_only(self, strokes) -> JobReport:
+        """A copy the printer completed before the host lost it (its JOB_END confirmed):
+        nothing is printed again; the report counts its strokes and drops."""
+        rep = self.report
+        for stroke in strokes:
+            rep.strokes_printed += 1
+            for c in range(4):
+                rep.drops[c] += int(stroke.dots[c])
+        rep.strokes_skipped = rep.strokes_total - rep.strokes_printed
+        rep.state = "done"
+        self._state("done", "completed before the interruption")
         return rep
 
     def _failure_words(self, exc: Exception) -> str:

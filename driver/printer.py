@@ -220,9 +220,25 @@ class Printer:
         """Clear a latched fault; the fault code that was cleared (0: there was none)."""
         return self.link.call(P.Op.CLEAR_FAULT).fault
 
+    def job_status(self):
+        """The printer's account of its job (docs/protocol.md 2.10: power-up number, job,
+        its state, lines done, last stroke), or None from a printer before protocol 1.2,
+        which cannot tell."""
+        info = self.device.info or self.connect()
+        if (info.get("proto_major"), info.get("proto_minor", 0)) < (1, 2):
+            return None
+        return self.link.call(P.Op.JOB_STATUS)
+
     def end_open_job(self, job_id: int) -> bool:
-        """End the printer's open job `job_id`, if one is open (JOB_END); True if it was."""
-        if not self.status().flags & P.FLAG_JOB_OPEN:
+        """End the printer's open job `job_id`, if it holds it open (JOB_END); True if it
+        did.  A printer before protocol 1.2 cannot say which job is open: any open job is
+        ended.  Nothing is sent while a fault is latched (JOB_END would be refused; the job
+        that follows meets the fault and stops there)."""
+        st = self.status()
+        if not st.flags & P.FLAG_JOB_OPEN or st.fault != P.Fault.NONE:
+            return False
+        js = self.job_status()
+        if js is not None and (js.job != job_id or js.job_state != P.JobState.OPEN):
             return False
         self.link.call(P.Op.JOB_END, job=job_id)
         return True

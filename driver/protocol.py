@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-PROTOCOL_VERSION = (1, 1)      # 1.1: head care, section 2.9
+PROTOCOL_VERSION = (1, 2)      # 1.1: head care, section 2.9; 1.2: JOB_STATUS, 2.10
 
 # -- section 1: the data channel's USB function ----------------------------------------------
 USB_VID = 0x1209      # pid.codes, the open-hardware vendor id
@@ -41,6 +41,14 @@ MAX_TRIES = 3               # seed 004: three consecutive failures abandon and r
 
 
 NO_STROKE = 0xFFFFFFFF      # GET_STATUS stroke id after JOB_BEGIN, before the job's first line
+NO_JOB = 0xFFFFFFFF         # JOB_STATUS job id before the first JOB_BEGIN since power-up
+
+
+class JobState(enum.IntEnum):
+    """JOB_STATUS job_state (section 2.10)."""
+    NONE = 0        # no job since power-up
+    OPEN = 1        # JOB_BEGIN, no JOB_END yet
+    ENDED = 2       # ended by JOB_END
 
 
 class Kind(enum.IntEnum):
@@ -76,6 +84,7 @@ class Op(enum.IntEnum):
     PURGE = 0x18
     CAP = 0x19
     SERVICE_STATUS = 0x1A
+    JOB_STATUS = 0x1B       # the printer's account of its job (section 2.10), protocol 1.2
 
 
 def op_name(op: int) -> str:
@@ -500,6 +509,7 @@ decl(Op.SPIT, request="drops:u16 heads:u8", echo=True)
 decl(Op.PURGE, request="ms:u16 heads:u8", echo=True)
 decl(Op.CAP, request="on:u8", echo=True)
 decl(Op.SERVICE_STATUS, response="capped:u8 wet_clock_ms:u32 spit_age_ms:u32[8]")
+decl(Op.JOB_STATUS, response="boot:u32 job:u32 job_state:u8 lines_done:u32 last_stroke:u32")
 
 
 def encode_request(op: int, **values) -> bytes:

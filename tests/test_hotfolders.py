@@ -65,10 +65,18 @@ def jobs(server):
     return server.client.request("GET", "/v1/jobs")["jobs"]
 
 
-def spool_orphans(server):
-    """Files in spool/ that no job owns."""
-    used = server.spool.spool_files_in_use()
-    return sorted(str(p) for p in server.spool.spool_dir.iterdir() if str(p) not in used)
+def spool_orphans(server, settle: float = 5.0):
+    """Files in spool/ that no job owns, once the worker had `settle` seconds to delete
+    them: a job's original is moved before its end commits, and its spool copy deleted
+    after (docs/server.md "Crash recovery"), so a test that saw the original move may look
+    a moment before the copy goes."""
+    deadline = time.monotonic() + settle
+    while True:
+        used = server.spool.spool_files_in_use()
+        out = sorted(str(p) for p in server.spool.spool_dir.iterdir() if str(p) not in used)
+        if not out or time.monotonic() > deadline:
+            return out
+        time.sleep(0.05)
 
 
 def wait_idle(server, timeout=60):

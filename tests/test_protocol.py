@@ -228,8 +228,9 @@ def _send_rest_of_config(ser, held: int) -> None:
 
 def test_emulator_answers_the_doc_examples_byte_for_byte():
     """The emulated DSP, fed the documented host bytes in order, sends the documented
-    answers (its idle time not counted, as in the doc: section 2.9)."""
-    ser, _ = in_process(Printer(faults=Faults(idle_time_scale=0)))
+    answers (its idle time not counted, its power-up number 1, as in the doc: sections 2.9,
+    2.10)."""
+    ser, _ = in_process(Printer(faults=Faults(idle_time_scale=0, boot=1)))
     lines = [ln for ln in FRAMES if ln[1] in ("host->dsp", "dsp->host")]
     held = 0
     for (name, direction, data), (reply, rdir, expected) in zip(lines[::2], lines[1::2]):

@@ -822,7 +822,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
         line = dict(zip(*list(csv.reader(io.StringIO(prints_csv([row]))))))
         assert (line["passes"], line["strokes_total"], line["strokes_printed"]) == ("2", "9", "4")
         (rec,) = sp.recover("resume")
-        assert rec["message"] == "interrupted (server stopped); resuming at stroke 5"
+        assert rec["message"].startswith("interrupted (server stopped); resuming at stroke 5 ")
         claimed = sp.claim(1)                      # same epoch: it resumes from its checkpoint
         assert claimed["checkpoint"]["next_stroke"] == 5 and claimed["strokes_done"] == 5
     finally:

@@ -102,7 +102,7 @@ class ServerConfig:
     hot_folder_root: Path | None = None
     host: str = "127.0.0.1"
     port: int = DEFAULT_PORT
-    on_crash: str = "resume"               # resume | hold
+    on_crash: str = "resume"               # resume | hold | reprint (docs/server.md "Crash recovery")
     max_file_bytes: int = DEFAULT_MAX_FILE
     scan_interval: float = 1.0
     start_paused: bool = False

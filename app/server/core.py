@@ -37,6 +37,7 @@ from .hotfolders import HotFolders
 from .presets import Presets
 from .previews import Previews
 from .sdnotify import notify
+from . import crashpoints
 from .spool import Spool
 from .validate import Invalid, _check_int, validate_settings
 from .worker import Worker
@@ -232,6 +233,8 @@ class PrintServer:
             raise
         if not created:
             _unlink(spool_path)
+        else:
+            crashpoints.reached("upload")
         return job, created
 
     def spool_copy(self, src, name: str, size: int, exact: bool = False) -> tuple[str, int, str]:

@@ -340,11 +340,26 @@ class Spool:
                       (json.dumps(checkpoint, sort_keys=True),
                        int(checkpoint.get("next_stroke", 0)), strokes_total, job_id))
 
-    def copy_done(self, job_id: int) -> dict:
-        """One copy printed: the next copy starts afresh."""
+    def copy_done(self, job_id: int, row: dict | None = None) -> dict:
+        """One copy printed: its accounting row and the count in one transaction (a crash
+        can leave neither or both: never a copy counted and printed again, docs/server.md
+        "Crash recovery"); the next copy starts afresh."""
         with self.tx() as c:
+            self._add_print(c, row)
             c.execute("UPDATE jobs SET copies_done=copies_done+1, checkpoint=NULL, "
                       "copy_started=NULL, interrupted=0 WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def restart(self, job_id: int, message: str, row: dict | None, hold: bool) -> dict:
+        """The printer could not confirm the job's checkpoint (docs/protocol.md 2.10): the
+        copy's strokes on the sheet are accounted (`row`, outcome `interrupted`) and the
+        job starts again from its first stroke — held for the operator, or queued at the
+        head of the queue (`--on-crash reprint`); one transaction."""
+        with self.tx() as c:
+            self._add_print(c, row)
+            c.execute("UPDATE jobs SET state=?, interrupted=?, checkpoint=NULL, strokes_done=0, "
+                      "copy_started=NULL, message=? WHERE id=? AND state='printing'",
+                      ("held" if hold else "queued", 0 if hold else 1, message, job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
     def start_copy(self, job_id: int) -> None:
@@ -355,11 +370,12 @@ class Spool:
             self._bump_epoch(c, row[0] if row else None)
             c.execute("UPDATE jobs SET copy_started=?, strokes_done=0 WHERE id=?", (now, job_id))
 
-    def stop_for_fault(self, job_id: int, message: str) -> dict:
+    def stop_for_fault(self, job_id: int, message: str, row: dict | None = None) -> dict:
         """A printer fault stopped the job: it is held, with its checkpoint and the fault,
         until the operator clears the fault (resume: back to the queue, where it goes on at
         its first unfinished stroke; or fail it).  docs/server.md, "Printer faults"."""
         with self.tx() as c:
+            self._add_print(c, row)
             c.execute("UPDATE jobs SET state='held', interrupted=1, fault=?, message=? "
                       "WHERE id=? AND state='printing'", (message, message, job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
@@ -390,14 +406,29 @@ class Spool:
             c.execute("UPDATE jobs SET printer=? WHERE id=?", (printer, job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
-    def finish(self, job_id: int, state: str, message: str = "", keep_copy: bool = False) -> dict:
-        """The job ended.  keep_copy: its spool copy stays (a failed or cancelled job the
-        operator may requeue); otherwise the caller deletes the file."""
+    def finish(self, job_id: int, state: str, message: str = "", keep_copy: bool = False,
+               row: dict | None = None, copy_done: bool = False,
+               members: dict[int, str] | None = None) -> dict:
+        """The job ended, in one transaction with what ends with it: its last copy's
+        accounting `row` (and, `copy_done`, that copy counted), and the jobs nested on its
+        sheet (`members`: id -> message), which end in the same state.  keep_copy: the
+        spool copies stay (a failed or cancelled job the operator may requeue); otherwise
+        the caller deletes the files once this has committed."""
         assert state in FINAL
+        now = time.time()
         with self.tx() as c:
+            self._add_print(c, row)
+            if copy_done:
+                c.execute("UPDATE jobs SET copies_done=copies_done+1 WHERE id=?", (job_id,))
+            for mid, msg in (members or {}).items():
+                c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, "
+                          "fault='', checkpoint=NULL, spool_path=CASE WHEN ? THEN spool_path "
+                          "END WHERE id=? AND state NOT IN ('done','failed','cancelled')",
+                          (state, msg, now, int(keep_copy), mid))
             c.execute("UPDATE jobs SET state=?, message=?, finished=?, interrupted=0, fault='', "
-                      "checkpoint=NULL, spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
-                      (state, message, time.time(), int(keep_copy), job_id))
+                      "checkpoint=NULL, copy_started=NULL, "
+                      "spool_path=CASE WHEN ? THEN spool_path END WHERE id=?",
+                      (state, message, now, int(keep_copy), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
     def wait_for_printer(self, job_id: int, message: str) -> None:
@@ -546,7 +577,8 @@ class Spool:
                     c.execute("UPDATE jobs SET state='held', interrupted=1, message=? WHERE id=?",
                               (msg, job["id"]))
                 else:
-                    msg = f"interrupted (server stopped); resuming at {at}"
+                    msg = (f"interrupted (server stopped); resuming at {at} once the printer "
+                           f"confirms the sheet holds the strokes before it")
                     c.execute("UPDATE jobs SET state='queued', interrupted=1, message=? WHERE id=?",
                               (msg, job["id"]))
                 job["message"] = msg
@@ -564,9 +596,15 @@ class Spool:
 
     # -- accounting -------------------------------------------------------------------------
     def add_print(self, row: dict) -> None:
-        cols = ", ".join(row)
         with self.tx() as c:
-            c.execute(f"INSERT INTO prints ({cols}) VALUES ({','.join('?' * len(row))})",
+            self._add_print(c, row)
+
+    @staticmethod
+    def _add_print(c, row: dict | None) -> None:
+        """A copy's accounting row, inside the caller's transaction (the copy's state
+        change commits with it)."""
+        if row:
+            c.execute(f"INSERT INTO prints ({', '.join(row)}) VALUES ({','.join('?' * len(row))})",
                       tuple(row.values()))
 
     def prints(self, job_id: int | None = None) -> list[dict]:

@@ -13,6 +13,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from . import crashpoints
 from .spool import COLORS
 from .validate import rip_settings, with_icc_paths
 
@@ -435,7 +436,7 @@ class Worker(threading.Thread):
     def _run_job(self, job_id: int) -> None:
         from ...rip.load import ImageError
         from ...rip.pipeline import RipJob
-        from ...driver.job import JobCancelled, JobError, PrintJob
+        from ...driver.job import JobCancelled, JobError, PrintJob, ResumeRefused
         from ...driver.link import DeviceError, LinkError
         from ...driver.stream import StreamError
 
@@ -443,6 +444,7 @@ class Worker(threading.Thread):
         job = self.spool.claim(job_id, self.name_)
         if job is None:
             return
+        crashpoints.reached("claim")
         resumed = job["checkpoint"] is not None
         self.current = dict(id=job_id, name=job["name"], copy=job["copies_done"] + 1,
                             copies=job["copies"], state="ripping", detail="", stroke_index=None,
@@ -463,11 +465,16 @@ class Worker(threading.Thread):
             first = False
             started = job["copy_started"] or time.time()
             if job_id in self._cancel:
-                self._account(job, copy, started, None, "cancelled", "cancelled by the operator",
-                              resumed)
-                self._finish(job, "cancelled", "cancelled by the operator")
+                self._finish(job, "cancelled", "cancelled by the operator",
+                             self._print_row(job, copy, started, None, "cancelled",
+                                             "cancelled by the operator", resumed))
                 return
             members = self.spool.members(job)
+            damaged = self._damaged_copy(job, members)
+            if damaged:
+                self._finish(job, "failed", damaged,
+                             self._print_row(job, copy, started, None, "failed", damaged, resumed))
+                return
             try:
                 rip = RipJob(job["spool_path"], rip_settings(settings), self.profile,
                              more=tuple(m["spool_path"] for m in members),
@@ -475,21 +482,21 @@ class Worker(threading.Thread):
                 layout = rip.layout.report if rip.layout is not None else None
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
-                self._account(job, copy, started, None, "failed", msg, resumed)
-                self._finish(job, "failed", msg)
+                self._finish(job, "failed", msg,
+                             self._print_row(job, copy, started, None, "failed", msg, resumed))
                 return
             try:
                 try:
                     dev = self._device()
-                    if cp is None and copy == 1 and job["attempt"] > 1:
+                    if cp is None:
                         self._close_earlier_attempt(dev, job_id)
                 except (LinkError, OSError, ValueError) as exc:
                     self._offline(job_id, str(exc))
                     return
                 except DeviceError as exc:
                     msg = f"ending the earlier attempt on the printer: {exc}"
-                    self._account(job, copy, started, None, "failed", msg, resumed)
-                    self._finish(job, "failed", msg)
+                    self._finish(job, "failed", msg,
+                                 self._print_row(job, copy, started, None, "failed", msg, resumed))
                     return
                 epoch = job.get("epoch") or self.spool.epoch(self.name_)
 
@@ -499,6 +506,8 @@ class Worker(threading.Thread):
                         self.spool.save_checkpoint(job_id, dict(kw["checkpoint"], epoch=epoch,
                                                                 copy=copy),
                                                    pj.report.strokes_total)
+                        crashpoints.reached("job_end" if kw["checkpoint"].get("ended")
+                                            else "checkpoint")
                         cur["strokes_printed"] = kw["checkpoint"].get("next_stroke", 0)
                         cur["strokes_total"] = pj.report.strokes_total
                     elif kind == "state":
@@ -516,8 +525,21 @@ class Worker(threading.Thread):
                 try:
                     rep = pj.run()
                 except JobCancelled as exc:
-                    self._account(job, copy, started, pj.report, "cancelled", str(exc), resumed)
-                    self._finish(job, "cancelled", f"cancelled by the operator ({exc})")
+                    self._finish(job, "cancelled", f"cancelled by the operator ({exc})",
+                                 self._print_row(job, copy, started, pj.report, "cancelled",
+                                                 str(exc), resumed))
+                    return
+                except ResumeRefused as exc:
+                    # the printer cannot confirm the sheet holds the checkpoint's strokes: never
+                    # go on from there (docs/server.md "Crash recovery"); what is on the sheet
+                    # is accounted, and the job starts again from its first stroke
+                    hold = self.srv.config.on_crash != "reprint"
+                    msg = (f"{exc}; held: release it to print it again from its first stroke, "
+                           f"or cancel it" if hold else
+                           f"{exc}; printing it again from its first stroke")
+                    self.spool.restart(job_id, msg, self._print_row(
+                        job, copy, started, pj.report, "interrupted", str(exc), resumed), hold)
+                    log.warning("job %s: %s", job_id, msg)
                     return
                 except JobError as exc:
                     cause = exc.__cause__
@@ -528,15 +550,15 @@ class Worker(threading.Thread):
                     if exc.fault and not self.stopping:
                         # the printer's fault, not the job's: this printer stops at the job,
                         # which keeps its checkpoint until the operator clears the fault
-                        self._account(job, copy, started, pj.report, "stopped", str(exc), resumed)
-                        self.spool.stop_for_fault(job_id, str(exc))
+                        self.spool.stop_for_fault(job_id, str(exc), self._print_row(
+                            job, copy, started, pj.report, "stopped", str(exc), resumed))
                         self.fault = str(exc)
                         self.printer_state, self.printer_error = "fault", str(exc)
                         self.set_paused(True, f"printer fault: {exc}; clear it to resume or fail the job")
                         log.warning("printer %s: %s; job %s waits", self.name_, exc, job_id)
                         return
-                    self._account(job, copy, started, pj.report, "failed", str(exc), resumed)
-                    self._finish(job, "failed", str(exc))
+                    self._finish(job, "failed", str(exc), self._print_row(
+                        job, copy, started, pj.report, "failed", str(exc), resumed))
                     return
                 finally:
                     self.job = None
@@ -545,43 +567,88 @@ class Worker(threading.Thread):
             self.printer_state, self.printer_error = "printing", ""
             self._backoff = self.srv.config.reconnect_backoff[0]
             self._measure_paper()
-            self._account(job, copy, started, rep, "done", "", resumed)
-            job = self.spool.copy_done(job_id)
-        from ...rip.layout import layout_line
-        # a layout's figures (a nest: the media it saved) stay with the job
-        self._finish(job, "done", layout_line(layout) if layout else "")
+            row = self._print_row(job, copy, started, rep, "done", "", resumed)
+            if copy < job["copies"]:
+                job = self.spool.copy_done(job_id, row)
+                crashpoints.reached("copy_done")
+                continue
+            from ...rip.layout import layout_line
+            # the last copy: its row, its count and the job's end in one transaction; a
+            # layout's figures (a nest: the media it saved) stay with the job
+            self._finish(job, "done", layout_line(layout) if layout else "", row, copy_done=True)
+            return
+        self._finish(job, "done", "")          # every copy was done before a restart
+
+    @staticmethod
+    def _damaged_copy(job: dict, members: list[dict]) -> str:
+        """The spool copies checked against the digests taken when they were queued
+        (docs/server.md "Crash recovery"): a copy changed on disk since fails its job,
+        naming the file, instead of printing something nobody sent."""
+        import hashlib
+        for j in (job, *members):
+            path = j.get("spool_path")
+            if not path:
+                return f"{j['name']}: its spooled copy is gone"
+            h = hashlib.sha256()
+            try:
+                with open(path, "rb") as f:
+                    while chunk := f.read(1 << 20):
+                        h.update(chunk)
+            except OSError as exc:
+                return f"{j['name']}: its spooled copy {path} cannot be read ({exc.strerror})"
+            if h.hexdigest() != j["sha256"]:
+                return (f"{j['name']}: its spooled copy {path} is damaged (its SHA-256 is not "
+                        f"the one taken when it was queued); submit the file again")
+        return ""
 
     @staticmethod
     def _close_earlier_attempt(dev, job_id: int) -> None:
-        """A requeued job prints afresh under the same printer job id.  Its earlier attempt
-        failed or was cancelled without JOB_END, so the printer may still hold it open, and
-        would take the new JOB_BEGIN (same id, same image area) for the host reconnecting:
-        keep the old placement's media and paper position.  End it first (docs/server.md,
+        """A job starting afresh (a requeued job, a checkpoint the printer could not
+        confirm, a later copy) prints under the same printer job id.  An earlier run may
+        have ended without JOB_END, so the printer may still hold it open, and would take
+        the new JOB_BEGIN (same id, same image area) for the host reconnecting: keep the
+        old placement's media and paper position.  End it first (docs/server.md,
         "Requeue")."""
         from ...driver.printer import Printer
         printer = Printer(dev)
         printer.connect()
         printer.end_open_job(job_id)
 
-    def _finish(self, job: dict, state: str, message: str) -> None:
-        for m in self.spool.members(job):          # a nested sheet: its jobs end with it
-            if m["state"] not in ("done", "failed", "cancelled"):
-                self._finish(m, state, (f"on job {job['id']}'s nested sheet: {message}"
-                                        if message else f"printed on job {job['id']}'s nested sheet"))
+    def _finish(self, job: dict, state: str, message: str, row: dict | None = None,
+                copy_done: bool = False) -> None:
+        """The job ends: hot-folder originals moved first (a crash after the move resumes
+        the job, which ends again and finds nothing to move; one after the commit would
+        leave an original to be taken as a new job), then one transaction with its last
+        copy's row and the jobs on its nested sheet, then the spool copies deleted."""
+        members = [m for m in self.spool.members(job)
+                   if m["state"] not in ("done", "failed", "cancelled")]
+        words = {m["id"]: (f"on job {job['id']}'s nested sheet: {message}" if message
+                           else f"printed on job {job['id']}'s nested sheet") for m in members}
+        for m in members:                          # a nested sheet: its jobs end with it
+            self.srv.hot_done(m, state, words[m["id"]])
         self.srv.hot_done(job, state, message)
+        if job.get("hot_path"):
+            crashpoints.reached("hot_done")
         keep = self.srv.keeps_copy(state)
-        self.spool.finish(job["id"], state, message, keep_copy=keep)
+        self.spool.finish(job["id"], state, message, keep_copy=keep, row=row,
+                          copy_done=copy_done, members=words)
+        crashpoints.reached("finish")
         self._cancel.discard(job["id"])
-        path = job.get("spool_path")
-        if path and not keep:
-            try:
-                os.unlink(path)
-            except OSError:
-                pass
+        if not keep:
+            for j in (*members, job):
+                if j.get("spool_path"):
+                    try:
+                        os.unlink(j["spool_path"])
+                    except OSError:
+                        pass
+        for m in members:
+            log.info("job %s %s %s", m["id"], state, words[m["id"]])
         log.info("job %s %s %s", job["id"], state, message)
 
-    def _account(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
-                 resumed: bool) -> None:
+    def _print_row(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
+                   resumed: bool) -> dict:
+        """A copy's accounting row (docs/server.md "Accounting"), committed by the job's
+        state change that ends the copy."""
         prof = self.profile
         ended = time.time()
         r = rep.as_dict() if rep is not None else {}
@@ -598,4 +665,4 @@ class Worker(threading.Thread):
         for c, d in zip(COLORS, drops):
             row[f"drops_{c}"] = d
             row[f"ink_{c}_ml"] = round(d * pl * 1e-9, 12)
-        self.spool.add_print(row)
+        return row
