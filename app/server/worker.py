@@ -533,12 +533,14 @@ class Worker(threading.Thread):
                     # the printer cannot confirm the sheet holds the checkpoint's strokes: never
                     # go on from there (docs/server.md "Crash recovery"); what is on the sheet
                     # is accounted, and the job starts again from its first stroke
-                    hold = self.srv.config.on_crash != "reprint"
+                    # (nothing on the sheet yet: nothing to decide, it simply starts again)
+                    hold = self.srv.config.on_crash != "reprint" and exc.on_sheet > 0
                     msg = (f"{exc}; held: release it to print it again from its first stroke, "
                            f"or cancel it" if hold else
                            f"{exc}; printing it again from its first stroke")
                     self.spool.restart(job_id, msg, self._print_row(
-                        job, copy, started, pj.report, "interrupted", str(exc), resumed), hold)
+                        job, copy, started, pj.report, "interrupted", str(exc), resumed)
+                        if exc.on_sheet else None, hold)
                     log.warning("job %s: %s", job_id, msg)
                     return
                 except JobError as exc:
