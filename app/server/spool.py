@@ -82,7 +82,7 @@ CREATE TABLE IF NOT EXISTS prints (
     width_dots     INTEGER NOT NULL,
     height_rows    INTEGER NOT NULL,
     area_m2        REAL NOT NULL,
-    outcome        TEXT NOT NULL,             -- done, failed, cancelled
+    outcome        TEXT NOT NULL,             -- done, failed, cancelled, stopped, interrupted
     message        TEXT NOT NULL DEFAULT '',
     resumed        INTEGER NOT NULL DEFAULT 0,-- 1: finished after a server restart
     recoveries     INTEGER NOT NULL DEFAULT 0,
