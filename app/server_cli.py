@@ -297,9 +297,62 @@ def cmd_estop(args) -> int:
     return EXIT_OK
 
 
+def cmd_check(args) -> int:
+    """`serve --check [--repair]`: the state directory checked like a file system
+    (docs/server.md "The state directory"); --repair rebuilds a lost queue from the spool."""
+    import fcntl
+    from .server import default_state_dir, fsck
+    state = Path(args.state_dir or default_state_dir())
+    if not state.is_dir():
+        print(f"wideprint serve --check: {state} is not a folder", file=sys.stderr)
+        return EXIT_USAGE
+    fd = os.open(state / "server.lock", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"wideprint serve --check: a server is running on {state}: stop it first",
+                  file=sys.stderr)
+            return EXIT_FAILED
+        res = fsck.repair(state) if args.repair else fsck.check(state)
+    finally:
+        os.close(fd)
+    if args.json:
+        print(json.dumps(res, indent=2))
+    else:
+        print(f"state directory {res['state_dir']}")
+        print(f"  database: {res['database']}")
+        print(f"  jobs: {res['jobs']} ({res['active']} queued, held or printing)")
+        for what, words in (("missing", "spool copy missing"), ("damaged", "spool copy damaged")):
+            for j in res[what]:
+                print(f"  job {j['id']} {safe(j['name'])}: {words} ({j['path']})")
+        for f in res["orphans"]:
+            print(f"  {f['path']}: {safe(f['name'] or '?')}, no job owns it (can be rebuilt)")
+        for f in res["undescribed"]:
+            print(f"  {f['path']}: no job owns it and no description is beside it")
+        if args.repair:
+            if res["set_aside"]:
+                print(f"  the lost database was moved to {res['set_aside']}")
+            print(f"  rebuilt: {len(res['rebuilt'])} job(s), held: "
+                  + (", ".join(map(str, res["rebuilt"])) or "-"))
+            for f in res["skipped"]:
+                print(f"  not queued: {f['path']}: {f['why']}")
+        elif not res["ok"]:
+            print("  run again with --repair to queue the spooled files again (held)")
+    if args.repair:
+        return EXIT_OK if not res["skipped"] else EXIT_FAILED
+    return EXIT_OK if res["ok"] else EXIT_FAILED
+
+
+def safe(text: str) -> str:
+    return "".join(ch if ch.isprintable() else f"\\u{ord(ch):04x}" for ch in text)
+
+
 def cmd_serve(args) -> int:
     import logging
     from .server import ServerConfig, default_state_dir, serve
+    if args.check or args.repair:
+        return cmd_check(args)
     logging.getLogger("wideprint").setLevel(logging.DEBUG if args.verbose_server else logging.INFO)
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.WARNING,
@@ -619,6 +672,13 @@ def add_parser(sub) -> None:
                    help="address of the API (default 127.0.0.1; anything else exposes it)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT,
                    help=f"API port (default {DEFAULT_PORT}; 0 = any free port)")
+    p.add_argument("--check", action="store_true",
+                   help="check the state directory (database, spool) and report; the server "
+                        "does not start (docs/server.md 'The state directory')")
+    p.add_argument("--repair", action="store_true",
+                   help="with --check: a lost or damaged database is moved aside and the "
+                        "spooled files are queued again, held")
+    p.add_argument("--json", action="store_true", help="with --check: the report as JSON")
     p.add_argument("--on-crash", choices=("resume", "hold", "reprint"), default="resume",
                    help="a job that was printing when the server died: resume it at its "
                         "first unfinished stroke once the printer confirms the sheet holds "

@@ -9,6 +9,8 @@ the CLI, the GUI, CUPS and hot folders are its clients.  One module per concern:
     hotfolders  folders whose files become jobs
     api         the local HTTP/JSON API
     accounting  CSV of printed copies
+    fsck        the state directory checked at start and by `serve --check`; a lost queue rebuilt
+    crashpoints named points of a job's life where the crash tests kill the server
     core        PrintServer (ties the above together) and serve()
 """
 

@@ -37,7 +37,7 @@ from .hotfolders import HotFolders
 from .presets import Presets
 from .previews import Previews
 from .sdnotify import notify
-from . import crashpoints
+from . import crashpoints, fsck
 from .spool import Spool
 from .validate import Invalid, _check_int, validate_settings
 from .worker import Worker
@@ -66,6 +66,7 @@ class PrintServer:
         self.profile = self.profiles[self.printer_configs[0].name]
         self.preset_source = Presets(self.state_dir, self.profile)
         self.token = ensure_token(self.state_dir)
+        fsck.check_at_start(self.state_dir)        # a lost queue is never "cleaned" away
         self.spool = Spool(self.state_dir)
         self.started = time.time()
         self.recovered = self.spool.recover(config.on_crash)
@@ -125,21 +126,34 @@ class PrintServer:
         return path
 
     def _clean_spool(self) -> None:
-        """Private copies nobody references (a crash between copy and commit) go."""
+        """Private copies nobody references (a crash between copy and commit, or after a
+        job's end) go, with their descriptions; only ever after the database was found
+        whole (fsck.check_at_start)."""
         used = self.spool.spool_files_in_use()
+        gone = []
         for p in self.spool.spool_dir.iterdir():
             if str(p) not in used:
+                try:
+                    fsck.remove_copy(p)
+                    gone.append(p.name)
+                except OSError:
+                    pass
+        info = self.state_dir / fsck.INFO_DIR
+        for p in info.iterdir() if info.is_dir() else ():
+            if str(self.spool.spool_dir / p.name[:-len(".json")]) not in used:
                 try:
                     p.unlink()
                 except OSError:
                     pass
+        if gone:
+            log.info("spool: %d file(s) no job owns deleted: %s", len(gone), ", ".join(gone[:10]))
 
     def expire_spool(self) -> None:
         """Spool copies of failed and cancelled jobs older than --keep-failed go (those
         jobs can no longer be requeued)."""
         for path in self.spool.expire_copies(time.time() - self.config.keep_failed_s):
             try:
-                os.unlink(path)
+                fsck.remove_copy(path)
             except OSError:
                 pass
 
@@ -226,13 +240,15 @@ class PrintServer:
         try:
             if check is not None:
                 check()
+            # its description beside it, so a lost database can be rebuilt (fsck.py)
+            fsck.write_description(spool_path, dict(fields, name=name, size=n, sha256=digest))
             job, created = self.spool.add_job(name=name, spool_path=spool_path, size=n,
                                               sha256=digest, **fields)
         except BaseException:
-            _unlink(spool_path)
+            fsck.remove_copy(spool_path)
             raise
         if not created:
-            _unlink(spool_path)
+            fsck.remove_copy(spool_path)
         else:
             crashpoints.reached("upload")
         return job, created

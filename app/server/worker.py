@@ -13,7 +13,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
-from . import crashpoints
+from . import crashpoints, fsck
 from .spool import COLORS
 from .validate import rip_settings, with_icc_paths
 
@@ -640,7 +640,7 @@ class Worker(threading.Thread):
             for j in (*members, job):
                 if j.get("spool_path"):
                     try:
-                        os.unlink(j["spool_path"])
+                        fsck.remove_copy(j["spool_path"])
                     except OSError:
                         pass
         for m in members:
