@@ -39,6 +39,7 @@ def _scan_options(p: argparse.ArgumentParser, several: bool) -> None:
 
 
 SCAN_DPI = (50, 9600)
+SPECTRO_DPI = (10, 300)      # device_sim/spectro.py SPECTRO_DPI (not imported: --help stays light)
 
 
 def _check_scan(args) -> None:
@@ -277,9 +278,13 @@ def cmd_print(args) -> int:
         settings = _settings(args, profile)
         _check_icc(settings)
         _check_scan(args)
+        if args.spectro_out and not SPECTRO_DPI[0] <= args.spectro_dpi <= SPECTRO_DPI[1]:
+            raise ValueError(f"--spectro-dpi {args.spectro_dpi}: must be "
+                             f"{SPECTRO_DPI[0]}..{SPECTRO_DPI[1]}")
         _check_output_folders(report=args.report, media_out=args.media_out,
                               preview=args.preview, log_json=args.log_json,
-                              event_log=args.event_log, scan_out=args.scan_out)
+                              event_log=args.event_log, scan_out=args.scan_out,
+                              spectro_out=args.spectro_out)
     except (ValueError, OSError) as exc:
         return refuse(EXIT_USAGE, str(exc))
     if args.inject and args.device != "emulator":
@@ -287,7 +292,8 @@ def cmd_print(args) -> int:
     only_emulator = [o for o, v in (("--media-out", args.media_out), ("--preview", args.preview),
                                     ("--event-log", args.event_log), ("--vcd", args.vcd),
                                     ("--latched-out", args.latched_out),
-                                    ("--scan-out", args.scan_out)) if v]
+                                    ("--scan-out", args.scan_out),
+                                    ("--spectro-out", args.spectro_out)) if v]
     if only_emulator and not emulator:
         # a standalone emulator writes its media in its own process (`wideprint emulator
         # --media-out`); a real printer has none
@@ -297,11 +303,14 @@ def cmd_print(args) -> int:
                       f"by the device: `wideprint emulator --media-out MEDIA_{{job}}.tif`")
     media: dict[int, str | None] = {}
     scans: dict[int, str | None] = {}
+    spectros: dict[int, str | None] = {}
     scratch = tempfile.TemporaryDirectory(prefix="wideprint-") \
         if args.preview and not args.media_out else None
     try:
         scan = dict(scan_path=lambda job: scans.get(job), scan_dpi=args.scan_dpi) \
             if args.scan_out else {}
+        if args.spectro_out:
+            scan.update(spectro_path=lambda job: spectros.get(job), spectro_dpi=args.spectro_dpi)
         dev = open_device(args.device, profile, faults, media_path=lambda job: media.get(job),
                           event_log=args.event_log, **_emulator_options(args), **scan)
     except (LinkError, ValueError, OSError) as exc:
@@ -354,6 +363,7 @@ def cmd_print(args) -> int:
                 media_file = os.path.join(scratch.name, f"media-{i + 1}.tif")
             media[job_id] = media_file
             scans[job_id] = _media_path(args.scan_out, i, len(files))
+            spectros[job_id] = _media_path(args.spectro_out, i, len(files))
             if f in unlisted:
                 failed += 1
                 reports.append(job_failed(f, unlisted[f], dict(job_id=job_id)))
@@ -396,13 +406,17 @@ def cmd_print(args) -> int:
                 rep["media"] = media_file if args.media_out else None
                 if args.scan_out:
                     rep["scan"] = scans[job_id]
+                if args.spectro_out:
+                    rep["spectro"] = spectros[job_id]
                 if dev.emulator is not None:
                     rep["stray_drops"] = dev.emulator.jobs_done.get(job_id, {}).get("stray")
                 print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
                       f"{rep['width_dots']} x {rep['height_rows']} dots, "
                       f"ink C/M/Y/K {'/'.join(f'{v:.4f}' for v in rep['ink_ml'])} ml"
                       + (f" -> {shown(rep['media'])}" if rep["media"] else "")
-                      + (f", scan {shown(rep['scan'])}" if rep.get("scan") else ""), file=say)
+                      + (f", scan {shown(rep['scan'])}" if rep.get("scan") else "")
+                      + (f", spectro {shown(rep['spectro'])}" if rep.get("spectro") else ""),
+                      file=say)
                 if rip.layout is not None:
                     from ..rip.layout import layout_line
                     rep["files"] = [f, *extras[i]]
@@ -656,6 +670,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="structured job log: states, strokes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
     _scan_options(p, several=True)
+    p.add_argument("--spectro-out", metavar="LAB.tif",
+                   help="emulator only: the print measured by a spectrophotometer, float32 "
+                   "CIELAB (D50, 2°, M0) over the image area (docs/physical.md); with several "
+                   "files: -N suffix or {job}")
+    p.add_argument("--spectro-dpi", type=int, default=50, metavar="N",
+                   help="resolution of --spectro-out (default 50: a 0.5 mm aperture; 10..300)")
     _rip_options(p)
     p.set_defaults(func=cmd_print)
 

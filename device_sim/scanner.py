@@ -1,7 +1,8 @@
 """The emulated scanner (docs/physical.md): renders the drops of one job, placed by the
 physical media model (physical.py), as an 8-bit RGB or greyscale TIFF at a chosen
-resolution — dot gain, ink colours multiplied on paper white, the scanner's blur,
-rotation, scale error, placement and noise, all seeded.
+resolution — dot gain, the media's spectra (spectral.py, the spectrophotometer's model)
+seen through an RGB sensor's spectral sensitivities and its tone response, the scanner's
+blur, rotation, scale error, placement and noise, all seeded.
 
 Drops are splatted as they are fired into a rolling accumulator at the scan resolution
 (bilinear weights, so each drop keeps its exact centroid) and never kept; rows are
@@ -20,15 +21,18 @@ from ..rip.compiled import kernel
 
 from .faults import Faults
 from .physical import JobGeometry
+from .spectral import SpectralMedia, demichel
 
 MARGIN_UM = 3000.0                 # paper around the image area in the scan
 STRIP = 64                         # scan rows made at a time (and the noise's seed block)
-PAPER_WHITE = np.array([0.90, 0.90, 0.88], np.float32)        # linear reflectance, R G B
-INK_RATIO = np.array([[0.10, 0.55, 0.85],                       # C: a solid's reflectance ratio
-                      [0.80, 0.12, 0.45],                       # M
-                      [0.92, 0.85, 0.10],                       # Y
-                      [0.04, 0.04, 0.045]], np.float32)         # K
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)           # Rec. 709
+# The sensor: each channel's spectral sensitivity (its filter, the lamp and the CCD
+# together), a Gaussian (peak nm, sigma nm): a typical flatbed's, far from the CIE
+# observer's (no linear map makes it a colorimeter), normalised to 1 on a perfect white.
+SENSOR = ((605.0, 28.0), (535.0, 32.0), (455.0, 24.0))
+FLARE = 0.004                      # stray light over the whole field (share of white)
+TONE_GAMMA = 1 / 2.2               # the scanner's tone response: 255 (flare + signal)^gamma
+LUT_NODES = 17                     # the coverage -> sensor table: nodes per ink
 
 
 @kernel()
@@ -58,18 +62,70 @@ def _splat(acc, base, channel, px, py):
 
 
 @kernel()
-def _shade(ink, white, ratio, out):
-    """Ink amounts (rows, width, 4) -> linear reflectance (rows, width, 3): coverage
-    min(1, amount) of each ink multiplies the paper white (docs/physical.md)."""
-    for r in range(ink.shape[0]):
-        for c in range(ink.shape[1]):
+def _sense(cov, lut, white, out):
+    """Coverages (rows, width, 4) -> the sensor's linear signal (rows, width, 3),
+    interpolated in the coverage -> sensor table (nodes^4, 3: quadrilinear, exact on the
+    nodes)."""
+    g = lut.shape[0] - 1
+    idx = np.empty(4, np.int64)
+    fr = np.empty(4, np.float32)
+    for r in range(cov.shape[0]):
+        for c in range(cov.shape[1]):
+            blank = True
+            for i in range(4):
+                x = cov[r, c, i] * g
+                if x > 0.0:
+                    blank = False
+                k = min(int(x), g - 1)
+                idx[i] = k
+                fr[i] = x - k
+            if blank:
+                for b in range(3):
+                    out[r, c, b] = white[b]
+                continue
             for b in range(3):
-                v = white[b]
+                out[r, c, b] = 0.0
+            for corner in range(16):
+                w = np.float32(1.0)
                 for i in range(4):
-                    a = ink[r, c, i]
-                    if a > 0.0:
-                        v *= 1.0 - min(a, 1.0) * (1.0 - ratio[i, b])
-                out[r, c, b] = v
+                    w *= fr[i] if corner >> i & 1 else 1.0 - fr[i]
+                if w == 0.0:
+                    continue
+                i0 = idx[0] + (corner & 1)
+                i1 = idx[1] + (corner >> 1 & 1)
+                i2 = idx[2] + (corner >> 2 & 1)
+                i3 = idx[3] + (corner >> 3 & 1)
+                for b in range(3):
+                    out[r, c, b] += w * lut[i0, i1, i2, i3, b]
+
+
+def sensor_weights(wavelengths: np.ndarray) -> np.ndarray:
+    """(3, bands): the sensor's channels, each summing to 1 (a perfect white reads 1)."""
+    s = np.array([np.exp(-0.5 * ((wavelengths - mu) / sd) ** 2) for mu, sd in SENSOR])
+    return s / s.sum(axis=1, keepdims=True)
+
+
+_SENSOR_LUTS: dict = {}
+
+
+def sensor_lut(media: SpectralMedia) -> np.ndarray:
+    """(nodes, nodes, nodes, nodes, 3) float32: the sensor's linear signal of a spot with
+    these C, M, Y, K coverages (Demichel weights, Yule-Nielsen spectral Neugebauer)."""
+    key = (media.name, media.n)
+    lut = _SENSOR_LUTS.get(key)
+    if lut is None:
+        g = np.linspace(0.0, 1.0, LUT_NODES)
+        cov = np.stack(np.meshgrid(g, g, g, g, indexing="ij"), axis=-1).reshape(-1, 4)
+        refl = media.reflectance(demichel(cov))
+        lut = (refl @ sensor_weights(media.wavelengths).T).astype(np.float32)
+        lut = _SENSOR_LUTS[key] = lut.reshape((LUT_NODES,) * 4 + (3,))
+    return lut
+
+
+def scanner_tone(signal: np.ndarray) -> np.ndarray:
+    """The scanner's tone response: linear signal (white 1) -> 8-bit levels (float)."""
+    v = FLARE + (1.0 - FLARE) * np.clip(signal, 0.0, 1.0)
+    return np.power(v, TONE_GAMMA) * 255.0
 
 
 def disc_kernel(diameter_px: float, oversample: int = 8) -> np.ndarray:
@@ -84,20 +140,14 @@ def disc_kernel(diameter_px: float, oversample: int = 8) -> np.ndarray:
     return inside.mean(axis=(2, 3)).astype(np.float32)
 
 
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    linear = np.clip(linear, 0.0, 1.0)
-    return np.where(linear <= 0.0031308, 12.92 * linear,
-                    1.055 * np.power(linear, 1 / 2.4) - 0.055) * 255.0
-
-
 LUT_SIZE = 1 << 16
-_SRGB_LUT = srgb_encode(np.arange(LUT_SIZE) / (LUT_SIZE - 1)).astype(np.float32)
+_TONE_LUT = scanner_tone(np.arange(LUT_SIZE) / (LUT_SIZE - 1)).astype(np.float32)
 
 
 @kernel()
 def _encode(linear, noise, lut, out):
-    """8-bit sRGB of linear reflectance (a 65,536-entry table: within 0.05 levels of
-    srgb_encode) plus noise, rounded and clipped; all arrays flat."""
+    """8-bit levels of the linear signal through the tone response (a 65,536-entry table:
+    within 0.05 levels of scanner_tone) plus noise, rounded and clipped; all flat."""
     top = lut.shape[0] - 1
     for i in range(linear.shape[0]):
         j = int(min(max(linear[i], 0.0), 1.0) * top + 0.5)
@@ -109,7 +159,8 @@ class Scanner:
     """The scan of one job (docs/physical.md, "The scan")."""
 
     def __init__(self, path: str, geo: JobGeometry, dpi: float, dot_um: float,
-                 faults: Faults, slack_um: float = 0.0, swath_um: float = 20_000.0):
+                 faults: Faults, slack_um: float = 0.0, swath_um: float = 20_000.0,
+                 media: SpectralMedia | None = None, drop_pl: float = 40.0):
         if not 50 <= dpi <= 9600:
             raise ValueError(f"scan resolution {dpi} dpi: must be 50..9600")
         self.path, self.geo, self.dpi = path, geo, float(dpi)
@@ -124,7 +175,14 @@ class Scanner:
         self.slack_um = slack_um
         self.dot_um = dot_um
         self.kernel = disc_kernel(dot_um / self.pix)
+        self.media = media if media is not None else SpectralMedia.load()
+        self.lut = sensor_lut(self.media)
+        self.white = np.ascontiguousarray(self.lut[0, 0, 0, 0])        # the paper's signal
+        # ink beyond the media's limit (docs/physical.md): its volume, smoothed, per pixel
+        self.unit = drop_pl * 1000.0 / (float(self.kernel.sum()) * self.pix ** 2)
+        self.bleed_px = self.media.bleed_um / self.pix
         self.rk = self.kernel.shape[0] // 2
+        self.rv = int(math.ceil(3 * self.bleed_px)) if self.bleed_px > 0 else 0
         self.sigma = faults.scan_blur.um(geo.col_um, geo.row_um) / self.pix
         self.rb = int(math.ceil(3 * self.sigma)) + 1 if self.sigma > 0 else 0
         # geometry: scan pixel q = A (p - c) + c + o, p the sheet's pixel
@@ -134,7 +192,7 @@ class Scanner:
         self.Ainv = np.linalg.inv(self.A)
         self.c = np.array([(self.width - 1) / 2.0, (self.height - 1) / 2.0])
         self.o = np.array(faults.scan_offset, np.float64) * 1000.0 / self.pix
-        self._acc = np.zeros((int((swath_um + slack_um) / self.pix) + 2 * self.rk + 8,
+        self._acc = np.zeros((int((swath_um + slack_um) / self.pix) + 2 * (self.rk + self.rv) + 8,
                               self.width, 4), np.float32)
         self._a_base = -self.rk - 1            # sheet pixel row of accumulator row 0
         self._refl: list[np.ndarray] = []      # rendered rows [r_base, r_next)
@@ -189,7 +247,7 @@ class Scanner:
         if self.closed:
             return
         try:
-            self._render(self.height + self.rk + 1)
+            self._render(self.height + self.rk + self.rv + 1)
         finally:
             self._out.close()
         self._acc, self._refl = np.zeros((0, 0, 4), np.float32), []      # the geometry stays
@@ -199,7 +257,7 @@ class Scanner:
     def _render(self, done: int) -> None:
         """Sheet rows < done receive no more drops: render what they complete, then write
         the scan rows that can be made."""
-        upto = min(done - self.rk, self.height)
+        upto = min(done - self.rk - self.rv, self.height)
         if upto > self._r_next:
             self._reflectance(self._r_next, upto)
         while self._v_next < self.height:
@@ -214,22 +272,25 @@ class Scanner:
             self._drop_reflectance(lo)
 
     def _reflectance(self, r0: int, r1: int) -> None:
-        """Render sheet rows [r0, r1) from the accumulator: dots, coverage, inks, paper."""
-        rk = self.rk
+        """Render sheet rows [r0, r1) from the accumulator: dots, coverage, ink limit, the
+        media's spectra through the sensor."""
+        from .spectro import coverage_rows
+        h = self.rk + self.rv
         refl = np.empty((r1 - r0, self.width, 3), np.float32)
         for c0 in range(r0, r1, STRIP):                 # in strips: small temporaries
             c1 = min(c0 + STRIP, r1)
-            a0, a1 = c0 - rk, c1 + rk
+            a0, a1 = c0 - h, c1 + h
             src = np.zeros((a1 - a0, self.width, 4), np.float32)
             s0, s1 = max(a0, self._a_base), min(a1, self._a_base + self._acc.shape[0])
             if s1 > s0:
                 src[s0 - a0:s1 - a0] = self._acc[s0 - self._a_base:s1 - self._a_base]
             ink = cv2.filter2D(src, -1, self.kernel, borderType=cv2.BORDER_CONSTANT)
-            _shade(ink[rk:rk + c1 - c0], PAPER_WHITE, INK_RATIO, refl[c0 - r0:c1 - r0])
+            cov = coverage_rows(ink, self.media, self.unit, self.bleed_px)
+            _sense(cov[h:h + c1 - c0], self.lut, self.white, refl[c0 - r0:c1 - r0])
         self._refl.append(refl)
         self._r_next = r1
         # accumulator rows the next rendering no longer needs
-        drop = (r1 - rk) - self._a_base
+        drop = (r1 - h) - self._a_base
         if drop > 0:
             keep = self._acc[drop:]
             self._acc = np.concatenate([keep, np.zeros((drop, self.width, 4), np.float32)])
@@ -246,12 +307,12 @@ class Scanner:
 
     def _rows(self, lo: int, hi: int) -> np.ndarray:
         if not self._refl:
-            return np.broadcast_to(PAPER_WHITE, (max(hi - lo, 1), self.width, 3)).copy()
+            return np.broadcast_to(self.white, (max(hi - lo, 1), self.width, 3)).copy()
         buf = np.concatenate(self._refl) if len(self._refl) > 1 else self._refl[0]
         self._refl = [buf]
         lo, hi = max(lo, self._r_base), min(hi, self._r_next)
         return buf[lo - self._r_base:hi - self._r_base] if hi > lo else \
-            np.broadcast_to(PAPER_WHITE, (1, self.width, 3)).copy()
+            np.broadcast_to(self.white, (1, self.width, 3)).copy()
 
     def _drop_reflectance(self, lo: int) -> None:
         if lo <= self._r_base or not self._refl:
@@ -270,7 +331,7 @@ class Scanner:
         m = np.zeros((2, 3))
         m[:, :2] = self.Ainv
         m[:, 2] = self.Ainv @ (np.array([0.0, v0]) - self.c - self.o) + self.c - np.array([0.0, lo])
-        white = tuple(float(w) for w in PAPER_WHITE)
+        white = tuple(float(w) for w in self.white)
         scan = cv2.warpAffine(np.ascontiguousarray(sheet), m, (self.width, v1 - v0),
                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                               borderMode=cv2.BORDER_CONSTANT, borderValue=white)
@@ -283,6 +344,6 @@ class Scanner:
         else:
             noise = np.zeros(scan.shape, np.float32)
         out = np.empty(scan.shape, np.uint8)
-        _encode(scan, noise, _SRGB_LUT, out)
+        _encode(scan, noise, _TONE_LUT, out)
         self._out.seek(self._data_offset + v0 * self._row_bytes)
         self._out.write(out.tobytes())

@@ -681,12 +681,34 @@ class MaintenanceSection(_Section):
                 f"below open_time_s ({self.open_time_s} s): a nozzle would dry mid-stroke")
 
 
+@dataclass(frozen=True, kw_only=True)
+class PhysicalSection(_Section):
+    """The loaded media as the emulator's physical model sees it (docs/physical.md, "The
+    colour of the print"): what its spectrophotometer and scanner measure."""
+    media: str = _key(_Str(), "solvent-vinyl", doc="spectral data of the paper and inks: "
+                      "resources/spectra/NAME.json")
+    yule_nielsen_n: float = _key(_Num(ge=1, le=10), 1.7, doc="the media's optical dot gain "
+                                 "(Yule-Nielsen n); 1: none")
+    ink_limit_ml_m2: float = _key(_Num(gt=0), 20.0, doc="wet ink (ml/m2 = um of film) the "
+                                  "media takes; more bleeds and adds no density")
+    bleed_um: float = _key(_Num(ge=0, le=5000), 150.0, doc="the reach (Gaussian sigma) over "
+                           "which ink beyond that limit spreads")
+
+    def _check(self, at: _At, ctx: _Ctx) -> None:
+        if not (RESOURCES / "spectra" / f"{self.media}.json").is_file():
+            have = sorted(p.stem for p in (RESOURCES / "spectra").glob("*.json")
+                          if not p.stem.startswith("cie"))
+            raise at.sub("media").error(f"no spectral data {self.media!r} in "
+                                        f"resources/spectra (have: {', '.join(have)})")
+
+
 # the sections in file (and checking) order: later ones are checked against earlier ones
 SECTIONS: dict[str, type] = {
     "printer": PrinterSection, "encoder": EncoderSection, "head": HeadSection,
     "layout": LayoutSection, "carriage": CarriageSection, "feed": FeedSection,
     "fpga": FpgaSection, "link": LinkSection, "paper": PaperSection,
     "color": ColorSection, "curves": CurvesSection, "maintenance": MaintenanceSection,
+    "physical": PhysicalSection,
 }
 
 
@@ -726,6 +748,7 @@ class Profile:
     color: ColorSection
     curves: CurvesSection
     maintenance: MaintenanceSection
+    physical: PhysicalSection
 
     # -- the names most of the code uses ------------------------------------------------------
     @property

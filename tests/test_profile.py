@@ -176,7 +176,8 @@ BAD = {
                          "x_counts, y_rows); did you mean color?"),
     "unknown section": (put("carrige", {"speed": 1}),
                         "[carrige]: unknown section (known sections: printer, encoder, head, "
-                        "layout, carriage, feed, fpga, link, paper, color, curves, maintenance); "
+                        "layout, carriage, feed, fpga, link, paper, color, curves, maintenance, "
+                        "physical); "
                         "did you mean [carriage]?"),
 }
 
@@ -198,7 +199,8 @@ def test_a_section_that_is_not_a_table(tmp_path):
     path = tmp_path / "flat.toml"
     path.write_text("link = 5\n" + DEFAULT_PROFILE.read_text().replace("[link]", "[unused]"))
     assert refused(path) == f"{path}: [unused]: unknown section (known sections: printer, " \
-        "encoder, head, layout, carriage, feed, fpga, link, paper, color, curves, maintenance)"
+        "encoder, head, layout, carriage, feed, fpga, link, paper, color, curves, maintenance, " \
+        "physical)"
     path.write_text("link = 5\n" + re.sub(r"(?s)\[link\].*?(?=\[paper\])", "", DEFAULT_PROFILE.read_text()))
     assert refused(path) == f"{path}: [link]: must be a table of keys, not 5"
 
