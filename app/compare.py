@@ -1,5 +1,6 @@
 """Compare two planes/media TIFFs dot for dot (`wideprint compare A B`, also
-`python -m wideprint.app.compare`).  Exit 0 when equal.  Either file may use either
+`python -m wideprint.app.compare`).  Exit 0 when equal, 1 when they differ, 2 when a file
+cannot be read (the message names it: missing, truncated, not a planes file).  Either file may use either
 encoding (8-bit or packed, docs/formats.md); both are read band by band, so memory is a
 band of each, whatever the print's length."""
 
@@ -14,25 +15,50 @@ from ..rip.planes import iter_planes
 COLORS = "CMYK"
 
 
+class CompareError(Exception):
+    """A file that cannot be compared (missing, truncated, not a planes file): the message
+    names it."""
+
+
+def _reading(path: str, what):
+    """what() with any failure to read `path` turned into CompareError naming the file."""
+    try:
+        return what()
+    except CompareError:
+        raise
+    except MemoryError:
+        raise CompareError(f"{path}: too large to read") from None
+    except OSError as exc:
+        raise CompareError(f"{path}: {exc.strerror or exc}") from None
+    except Exception as exc:  # noqa: BLE001 - a damaged file breaks the reader anywhere
+        raise CompareError(f"{path}: cannot be read as a planes TIFF (truncated or damaged?): "
+                           f"{type(exc).__name__}: {exc}") from None
+
+
 def _size(path: str) -> tuple[int, int]:
+    return _reading(path, lambda: _shape(path))
+
+
+def _shape(path: str) -> tuple[int, int]:
     import tifffile
     with tifffile.TiffFile(path) as tf:
         shape = tf.pages[0].shape
     if len(shape) != 3 or shape[2] != 4:
-        raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {shape})")
+        raise CompareError(f"{path}: not a 4-channel CMYK planes file (shape {shape})")
     return shape[0], shape[1]
 
 
 def _aligned(a_path: str, b_path: str):
     """(first row, a rows, b rows): the two files cut into the same bands."""
-    ia, ib = iter_planes(a_path), iter_planes(b_path)
+    ia = _reading(a_path, lambda: iter_planes(a_path))
+    ib = _reading(b_path, lambda: iter_planes(b_path))
     a = b = np.zeros((0, 0, 4), np.uint8)
     y = 0
     while True:
         if not len(a):
-            a = next(ia, None)
+            a = _reading(a_path, lambda: next(ia, None))
         if not len(b):
-            b = next(ib, None)
+            b = _reading(b_path, lambda: next(ib, None))
         if a is None or b is None:
             return
         n = min(len(a), len(b))
@@ -71,7 +97,11 @@ def main(argv=None) -> int:
     if len(argv) != 2:
         print("usage: compare A.tif B.tif", file=sys.stderr)
         return 2
-    same, text = compare(*argv)
+    try:
+        same, text = compare(*argv)
+    except CompareError as exc:
+        print(f"compare: {exc}", file=sys.stderr)
+        return 2
     print(text)
     return 0 if same else 1
 

@@ -29,29 +29,96 @@ class ApiError(Exception):
         self.status = status
 
 
+def user_token_file() -> Path:
+    """Where a user keeps the token the operator made for it (`wideprint users add`):
+    $XDG_CONFIG_HOME/wideprint/token, else ~/.config/wideprint/token."""
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "wideprint" / "token"
+
+
+def _read_client_token(path: Path) -> str:
+    """A token file as a client reads it: ApiError naming the file for one that is not
+    text or is empty (OSError passes for the caller to try the next file)."""
+    data = path.read_bytes()[:65536]
+    try:
+        token = data.decode("utf-8").strip()
+    except UnicodeDecodeError:
+        raise ApiError(0, f"the token file {path} is not text (binary or not UTF-8): ask the "
+                          f"operator for your token") from None
+    if not token or any(ch.isspace() or not ch.isprintable() for ch in token):
+        raise ApiError(0, f"the token file {path} is "
+                          + ("empty" if not token else "not a token (blanks or control characters)"))
+    return token
+
+
+def find_token(state_dir: Path) -> str:
+    """The client's token: the file $WIDEPRINT_TOKEN_FILE names, else the server's own
+    (STATE/token: the operator's), else the user's (`user_token_file()`)."""
+    from .server.config import TOKEN_FILE
+    env = os.environ.get("WIDEPRINT_TOKEN_FILE")
+    paths = [Path(env)] if env else [state_dir / TOKEN_FILE, user_token_file()]
+    problems = []
+    for path in paths:
+        try:
+            return _read_client_token(path)
+        except FileNotFoundError:
+            problems.append(f"no {path}")
+        except OSError as exc:
+            problems.append(f"{path}: {exc.strerror}")
+    raise ApiError(0, "cannot read an API token: " + "; ".join(problems))
+
+
+def read_server_file(state_dir: Path) -> str:
+    """The running server's URL from STATE/server.json.  ApiError (status 0) saying which:
+    no file (no server running), or a file that cannot be read or is not what a server
+    writes — then a server may well be running, and the file is named."""
+    from .server.config import SERVER_FILE
+    path = state_dir / SERVER_FILE
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ApiError(0, f"no wideprint server running for {state_dir} (no {SERVER_FILE}; "
+                          f"start `wideprint serve`)") from None
+    except OSError as exc:
+        raise ApiError(0, f"{path} cannot be read ({exc.strerror})") from None
+    try:
+        url = json.loads(raw.decode("utf-8"))["url"]
+        if not isinstance(url, str) or not url.startswith("http://") or not urlsplit(url).port:
+            raise ValueError(f"url {str(url)[:60]!r}")
+    except (ValueError, KeyError, TypeError) as exc:
+        why = "no url" if isinstance(exc, (KeyError, TypeError)) else str(exc)[:80]
+        raise ApiError(0, f"{path} is unreadable ({why}): it is not what a running server "
+                          f"writes; if a server runs, restart it (it writes the file anew), "
+                          f"else delete the file") from None
+    return url
+
+
+def _os_user() -> str | None:
+    try:
+        import getpass
+        return getpass.getuser()
+    except (ImportError, KeyError, OSError):
+        return None
+
+
 class Client:
     """A client of the local API: finds the server (server.json) and its token in the
-    state directory."""
+    state directory (or the user's own token, `find_token`), and says who it acts for
+    (`user`, default the OS user: header `X-Wideprint-User`, docs/server.md "Users and
+    roles")."""
 
     def __init__(self, state_dir: str | os.PathLike | None = None, url: str | None = None,
-                 token: str | None = None, timeout: float = 60.0):
-        from .server.config import SERVER_FILE, TOKEN_FILE, default_state_dir
+                 token: str | None = None, timeout: float = 60.0, user: str | None = None):
+        from .server.config import default_state_dir
         self.state_dir = Path(state_dir) if state_dir else default_state_dir()
         if url is None:
-            try:
-                url = json.loads((self.state_dir / SERVER_FILE).read_text())["url"]
-            except (OSError, ValueError, KeyError):
-                raise ApiError(0, f"no wideprint server running for {self.state_dir} "
-                               f"(no {SERVER_FILE}; start `wideprint serve`)") from None
+            url = read_server_file(self.state_dir)
         if token is None:
-            try:
-                token = (self.state_dir / TOKEN_FILE).read_text().strip()
-            except OSError as exc:
-                raise ApiError(0, f"cannot read the API token in {self.state_dir}: "
-                               f"{exc.strerror}") from None
+            token = find_token(self.state_dir)
         u = urlsplit(url)
         self.host, self.port = u.hostname, u.port
         self.token, self.timeout = token, timeout
+        self.user = user if user is not None else _os_user()
         self._conn: http.client.HTTPConnection | None = None
 
     def _connection(self) -> http.client.HTTPConnection:
@@ -68,6 +135,9 @@ class Client:
     def request(self, method: str, path: str, body=None, headers: dict | None = None,
                 raw: bool = False, binary: bool = False):
         hdrs = {"Authorization": f"Bearer {self.token}"}
+        if self.user:
+            from urllib.parse import quote
+            hdrs["X-Wideprint-User"] = quote(self.user, safe="@._+-")
         hdrs.update(headers or {})
         if isinstance(body, (dict, list)):
             body = json.dumps(body).encode()
@@ -138,6 +208,20 @@ class Client:
 
     def action(self, job_id: int, what: str) -> dict:
         return self.request("POST", f"/v1/jobs/{job_id}/{what}")["job"]
+
+    def cancel(self, job_id: int, timeout: float = 60.0, poll: float = 0.2) -> dict:
+        """Cancel a job and follow it to its end: the job as it ended (`cancelled`), or as
+        it still is after `timeout` (`printing`: the printer has not stopped yet).  ApiError
+        when the server refuses (an ended job, someone else's job, a full disk)."""
+        r = self.request("POST", f"/v1/jobs/{job_id}/cancel")
+        job = r["job"]
+        if not r.get("cancelling"):
+            return job
+        deadline = time.monotonic() + timeout
+        while job["state"] == "printing" and time.monotonic() < deadline:
+            time.sleep(poll)
+            job = self.job(job_id)
+        return job
 
     def status(self) -> dict:
         return self.request("GET", "/v1/status")
@@ -518,28 +602,42 @@ def cmd_queue(args) -> int:
     if not jobs:
         print("the queue is empty" + ("" if args.all else " (--all shows finished jobs)"))
         return EXIT_OK
+    from .safe_text import safe
     print(f"{'ID':>6} {'STATE':9} {'POS':>4} {'PRI':>4} {'STROKES':>9} {'COPIES':>6} "
           f"{'PRESET':10} {'SOURCE':12} {'SUBMITTED':9} NAME / MESSAGE")
     for j in jobs:
         strokes = f"{j['strokes_done']}/{j['strokes_total']}" if j["strokes_total"] else ""
         print(f"{j['id']:>6} {j['state']:9} {j.get('position') or '':>4} {j['priority']:>4} "
               f"{strokes:>9} {j['copies_done']}/{j['copies']:<4} {(j['preset'] or '-'):10.10} "
-              f"{j['source']:12.12} {_age(j['submitted']):9} {j['name']}"
+              f"{safe(j['source']):12.12} {_age(j['submitted']):9} {safe(j['name'])}"
               + (f" (attempt {j['attempt']})" if j.get("attempt", 1) > 1 else "")
-              + (f"  [{j['message']}]" if j["message"] else ""))
+              + (f"  [{safe(j['message'])}]" if j["message"] else ""))
     return EXIT_OK
 
 
 def _job_action(what: str):
     def cmd(args) -> int:
+        from .safe_text import safe
         try:
             client = _client(args)
             rc = EXIT_OK
             for job_id in args.ids:
                 try:
-                    job = client.action(job_id, what)
+                    if what == "cancel":
+                        # exit 0 only for a job that is cancelled (docs/server.md "The API")
+                        job = client.cancel(job_id, timeout=args.timeout)
+                        if job["state"] != "cancelled":
+                            print(f"wideprint cancel: job {job['id']} is {job['state']}"
+                                  + (f" {args.timeout:g} s after the cancel: the printer has "
+                                     f"not stopped yet (still printing); run cancel again "
+                                     f"or see `wideprint queue`" if job["state"] == "printing"
+                                     else ""), file=sys.stderr)
+                            rc = EXIT_FAILED
+                            continue
+                    else:
+                        job = client.action(job_id, what)
                     print(f"job {job['id']}: {job['state']}"
-                          + (f" ({job['message']})" if job["message"] else ""))
+                          + (f" ({safe(job['message'])})" if job["message"] else ""))
                 except ApiError as exc:
                     if exc.status == 0:
                         raise
@@ -549,6 +647,54 @@ def _job_action(what: str):
         except ApiError as exc:
             return _fail(what, exc)
     return cmd
+
+
+def cmd_users(args) -> int:
+    """`wideprint users add|remove|list`: straight on the state directory (who can write
+    there is the operator)."""
+    from .server.auth import add_user, check_user_name, list_users, remove_user
+    from .server.config import default_state_dir, write_token_file
+    state = Path(args.state_dir or default_state_dir())
+    what = args.users_command
+    if what == "list":
+        for name in list_users(state):
+            print(name)
+        return EXIT_OK
+    try:
+        check_user_name(args.name)
+    except ValueError as exc:
+        print(f"wideprint users: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if what == "remove":
+        if not remove_user(state, args.name):
+            print(f"wideprint users: user {args.name} has no token in {state}", file=sys.stderr)
+            return EXIT_FAILED
+        print(f"user {args.name}: token deleted (refused from the next request)", file=sys.stderr)
+        return EXIT_OK
+    if not state.is_dir():
+        print(f"wideprint users: no state directory {state}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        path, token = add_user(state, args.name, replace=args.replace)
+        if args.out:
+            out = Path(args.out)
+            write_token_file(out, token, replace=True)
+    except FileExistsError:
+        print(f"wideprint users: user {args.name} has a token already (--replace makes a new "
+              f"one)", file=sys.stderr)
+        return EXIT_FAILED
+    except OSError as exc:
+        print(f"wideprint users: {exc.filename or state}: {exc.strerror}", file=sys.stderr)
+        return EXIT_FAILED
+    if args.out:
+        print(f"user {args.name}: token in {path} and {args.out} (0600); the user keeps it in "
+              f"{user_token_file()} or names it in $WIDEPRINT_TOKEN_FILE", file=sys.stderr)
+    else:
+        print(f"user {args.name}: token made ({path}); the user keeps it in "
+              f"{user_token_file()} (0600) or names it in $WIDEPRINT_TOKEN_FILE",
+              file=sys.stderr)
+        print(token)
+    return EXIT_OK
 
 
 def cmd_status(args) -> int:
@@ -756,7 +902,29 @@ def add_parser(sub) -> None:
                                    "(they print again from the start)")):
         p = _client_parser(sub, name, help)
         p.add_argument("ids", nargs="+", type=int, metavar="ID")
+        if name == "cancel":
+            p.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                           help="wait at most this long for a printing job to stop (default "
+                                "60 s); exit 1 if it has not")
         p.set_defaults(func=_job_action(name))
+
+    p = sub.add_parser("users", help="the operator's user tokens: a user acts on its own jobs "
+                                     "only (docs/server.md \"Users and roles\")")
+    usub = p.add_subparsers(dest="users_command", required=True)
+    for name, help in (("add", "make a user's token (printed, or written to --out)"),
+                       ("remove", "delete a user's token: refused from the next request"),
+                       ("list", "the users with a token")):
+        q = usub.add_parser(name, help=help)
+        _state_dir_option(q)
+        if name != "list":
+            q.add_argument("name", metavar="NAME")
+        if name == "add":
+            q.add_argument("--out", metavar="FILE", help="write the token to FILE (0600) "
+                           "instead of printing it; the user keeps it in "
+                           "~/.config/wideprint/token")
+            q.add_argument("--replace", action="store_true",
+                           help="a user with a token gets a new one (the old one stops working)")
+        q.set_defaults(func=cmd_users)
 
     p = _client_parser(sub, "status", "the print server, printer and current job")
     p.add_argument("--json", action="store_true")

@@ -321,23 +321,52 @@ def test_a_head_trickled_byte_by_byte_is_cut_off(api):
     assert closed is None or closed < TIMEOUT + 1.5
 
 
-def test_connections_beyond_the_limit_get_503_at_once(api):
+def test_silent_connections_hold_no_thread(api):
+    """Connections that say nothing (or half a request head) wait in the listener, not in a
+    thread: more of them than the limit do not keep a request from being served at once."""
     idle = [connect(api) for _ in range(LIMIT + 3)]         # LIMIT + 3 silent connections
     try:
+        idle[0].sendall(b"GET /v1/status HT")
+        time.sleep(0.2)
+        threads = [t for t in threading.enumerate() if t.name == "wideprint-api-conn"]
+        assert not threads                                  # none of them holds a thread
+        t0 = time.monotonic()
+        assert get(api, "/v1/status")[0] == 200
+        assert time.monotonic() - t0 < 0.5 * TIMEOUT
+    finally:
+        for s in idle:
+            s.close()
+
+
+def test_requests_beyond_the_limit_get_503_at_once(api):
+    """Requests being served (bodies that do not come) are bounded: beyond the threads for
+    requests with a body the next one gets 503 at once; a plain GET still has its own."""
+    heavy = LIMIT - LIMIT // 4                               # threads bodies may take
+    slow = []
+    try:
+        for _ in range(heavy):
+            s = connect(api)
+            s.sendall(b"POST /v1/queue HTTP/1.1\r\n" + auth(api) + b"Content-Length: 17\r\n\r\n{")
+            slow.append(s)
         time.sleep(0.2)
         threads = [t for t in threading.enumerate() if t.name == "wideprint-api-conn"]
         assert len(threads) <= LIMIT                        # threads are bounded
         t0 = time.monotonic()
-        status, headers, body = exchange(api, b"GET /v1/status HTTP/1.1\r\n" + auth(api)
-                                         + b"\r\n", half_close=False)
+        status, headers, body = exchange(api, b"POST /v1/queue HTTP/1.1\r\n" + auth(api)
+                                         + b"Content-Length: 17\r\n\r\n" + QUEUE + b" ",
+                                         half_close=False)
         took = time.monotonic() - t0
         assert status == 503 and headers.get("retry-after") == "1", body
         assert took < 0.5 * TIMEOUT                          # promptly, not after the timeout
-        # the idle ones are closed after the timeout; then a normal request is served
+        t0 = time.monotonic()
+        assert get(api, "/v1/status")[0] == 200              # a GET still finds a thread
+        assert time.monotonic() - t0 < 0.5 * TIMEOUT
+        # the slow ones get 408 after the timeout; then everything is served again
         time.sleep(TIMEOUT + 0.5)
-        assert get(api, "/v1/status")[0] == 200
+        assert request(api, "POST", "/v1/queue", b"Content-Length: 17\r\n",
+                       b'{"paused": false}')[0] == 200
     finally:
-        for s in idle:
+        for s in slow:
             s.close()
 
 

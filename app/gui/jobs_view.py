@@ -13,6 +13,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QApplication, QHeaderView, QSt
                                QStyledItemDelegate, QStyleOptionProgressBar, QTableView)
 
 from ..estimate import fmt_duration
+from ..safe_text import safe
 
 THUMB = 48                    # thumbnail cell, pixels
 STATE_COLORS = {"failed": "#c62828", "cancelled": "#6d6d6d", "held": "#b26a00",
@@ -119,16 +120,16 @@ class JobsModel(QAbstractTableModel):
             return QColor(c) if c else None
         if role == Qt.ToolTipRole:
             if col in ("Job", ""):
-                return f"job {j['id']}: {j['name']} ({j['source']}, {j['size']:,} bytes)"
+                return f"job {j['id']}: {safe(j['name'])} ({safe(j['source'])}, {j['size']:,} bytes)"
             if col in ("State", "Outcome", "Message"):
-                return j.get("fault") or j.get("message") or None
+                return safe(j.get("fault") or j.get("message") or "", keep="\n") or None
             return None
         if role == Qt.TextAlignmentRole and col in ("Copies", "Prio"):
             return int(Qt.AlignCenter)
         if role != Qt.DisplayRole:
             return None
         if col == "Job":
-            return f"{j['id']}  {j['name']}"
+            return f"{j['id']}  {safe(j['name'])}"
         if col == "Printer":
             return j.get("printed_on") or j.get("printer") or "any"
         if col in ("State", "Outcome"):

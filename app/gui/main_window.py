@@ -23,6 +23,7 @@ from PySide6.QtWidgets import (QComboBox, QFileDialog, QGridLayout, QGroupBox, Q
 
 from ... import __version__
 from ..estimate import fmt_duration, fmt_ml
+from ..safe_text import safe
 from .config import GuiSettings, SETTINGS_FILE, default_config_dir
 from .jobs_view import JobsModel, JobsView
 from .logview import LogView
@@ -421,10 +422,10 @@ class MainWindow(QMainWindow):
                     self._ended_logged.add(j["id"])
                     msg = j.get("message") or ""
                     if j["state"] == "cancelled":
-                        log.info("job %s %s cancelled", j["id"], j["name"])
+                        log.info("job %s %s cancelled", j["id"], safe(j["name"]))
                     else:
                         log.log(ENDED.get(j["state"], logging.INFO), "job %s %s %s%s", j["id"],
-                                j["name"], j["state"], f": {short_paths(msg)}" if msg else "")
+                                safe(j["name"]), j["state"], f": {safe(short_paths(msg))}" if msg else "")
         self.link.call(lambda c: c.request("GET", f"/v1/jobs?state=done,failed,cancelled&limit="
                                               f"{HISTORY_ROWS}&newest=1")["jobs"], got)
 
@@ -470,7 +471,7 @@ class MainWindow(QMainWindow):
                                        and not j.get("fault") for j in jobs)
         if len(jobs) == 1:
             j = jobs[0]
-            title = f"Job {j['id']}: {j['name']}"
+            title = f"Job {j['id']}: {safe(j['name'])}"
         else:
             title = f"{len(jobs)} jobs: changes apply to each (mixed values differ between them)"
         if not editable:
@@ -507,7 +508,7 @@ class MainWindow(QMainWindow):
             h, w = rgb.shape[:2]
             info = dict(width_mm=w, height_mm=h)
         self.preview.set_image(rgb, info["width_mm"], info["height_mm"],
-                               f"Job {job['id']}: {job['name']}")
+                               f"Job {job['id']}: {safe(job['name'])}")
 
     def _preview_failed(self, key, message: str) -> None:
         if key != self._shown_key:
@@ -571,7 +572,7 @@ class MainWindow(QMainWindow):
             return
         for j in jobs:
             self.link.call(lambda c, _id=j["id"]: c.action(_id, "cancel"))
-            log.info("job %s %s: cancel asked by the operator", j["id"], j["name"])
+            log.info("job %s %s: cancel asked by the operator", j["id"], safe(j["name"]))
 
     def _priority(self, step: int) -> None:
         for j in self.selected_jobs():

@@ -72,6 +72,14 @@ def job_name(ipp_name: str, fmt: str) -> str:
     return name.encode("utf-8")[:240].decode("utf-8", "ignore") or "ipp-job"
 
 
+def requesting_user(user: str) -> str:
+    """An IPP requesting-user-name as the server takes it (X-Wideprint-User): without
+    control, invisible or reordering characters, at most 100 characters; "anonymous" when
+    nothing is left."""
+    from ..safe_text import unsafe
+    return "".join(ch for ch in user or "" if not unsafe(ch)).strip()[:100] or "anonymous"
+
+
 def ipp_job_fields(*, copies: int, quality: str, xdpi: int, orientation: int, intent: str,
                    presets, dpi_modes) -> dict:
     """The wideprint job description fields for a job's IPP options (docs/ipp.md, "What an
@@ -151,9 +159,9 @@ class IppBridge:
         self._threads: list[threading.Thread] = []
         self._dpi: dict[str, tuple] = {}
 
-    def _client(self):
+    def _client(self, user: str | None = None):
         from ..server_cli import Client
-        return Client(self.state_dir, url=self.url, token=self.token, timeout=30)
+        return Client(self.state_dir, url=self.url, token=self.token, timeout=30, user=user)
 
     # -- start and stop -------------------------------------------------------------------------
     def config_text(self, client) -> str:
@@ -278,7 +286,8 @@ class IppBridge:
     def _submit(self, f: list[str]) -> None:
         tag, printer, fmt, path, copies, quality, xdpi, orientation, intent, user, name = f
         from ..server_cli import ApiError
-        client = self._client()
+        # the job belongs to the IPP requesting-user-name (docs/server.md "Users and roles")
+        client = self._client(user=requesting_user(user))
         try:
             fields = ipp_job_fields(copies=int(copies), quality=quality, xdpi=int(xdpi),
                                     orientation=int(orientation), intent=intent,

@@ -12,6 +12,7 @@ never a traceback.
 
 from __future__ import annotations
 
+import errno
 import hmac
 import io
 import json
@@ -21,15 +22,19 @@ import queue
 import re
 import selectors
 import socket
+import socketserver
+import sqlite3
 import sys
 import threading
 import time
 from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlsplit
 
-from .config import SQLITE_MAX_INT
+from ..safe_text import REDACTED, add_secret, install_log_filter, safe
+from .auth import OPERATOR, USER, Identity, Owners, Users, claimed_name, may_act
+from .config import DEFAULT_API_TIMEOUT_S, MIN_TOKEN, SQLITE_MAX_INT
 from .previews import PREVIEW_PX, THUMB_PX
 from .spool import STATES, SpoolError
 from .validate import Invalid, _check_int, validate_job_request
@@ -38,6 +43,8 @@ if TYPE_CHECKING:
     from .core import PrintServer
 
 log = logging.getLogger("wideprint.server")
+# every log line of the server's loggers: names shown escaped, tokens taken out (safe_text)
+install_log_filter("wideprint.server", "wideprint.ipp", "wideprint.job", "wideprint.link")
 
 METHODS = ("GET", "POST", "PATCH", "DELETE")
 JSON_LIMIT = 1 << 20
@@ -64,10 +71,40 @@ def _number(name: str, text: str) -> int:
     return n
 
 
+SAFE_QUERY = frozenset(("state", "limit", "after", "newest", "job", "format", "px", "max_s"))
+
+
+def _loggable(target: str) -> str:
+    """A request target for the log: the values of query parameters other than the API's
+    own are taken out (a client that puts its token in the URL does not put it in the log)."""
+    path, q, query = target.partition("?")
+    if not q:
+        return target
+    parts = []
+    for item in query.split("&"):
+        k, eq, _ = item.partition("=")
+        parts.append(item if (not eq or k in SAFE_QUERY) else f"{k}={REDACTED}")
+    return path + "?" + "&".join(parts)
+
+
 def _shown(text: str, limit: int = 120) -> str:
-    """Request text for a log line: repr'd (no control character reaches the log), cut."""
-    r = repr(text)
+    """Request text for a log line: secrets in the query out, repr'd (no control character
+    reaches the log), cut."""
+    r = repr(_loggable(text))
     return r if len(r) <= limit else r[:limit] + "..."
+
+
+def storage_full(exc: BaseException) -> str | None:
+    """The plain reason when `exc` is a full disk (SQLite's "database or disk is full", or
+    ENOSPC/EDQUOT from the file system): such requests are answered 507, never 500."""
+    if isinstance(exc, sqlite3.OperationalError) and "full" in str(exc).lower():
+        return ("the server's disk is full: the queue's database cannot be written "
+                f"({exc}); nothing was changed — free space on the state directory's disk "
+                "and try again")
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return (f"the server's disk is full ({exc.strerror or exc}); nothing was changed — "
+                "free space and try again")
+    return None
 
 
 def _printable(text: str, limit: int = 300) -> str:
@@ -94,19 +131,33 @@ def loads(data) -> object:
 
 
 class _Reader(io.RawIOBase):
-    """The connection as the handler reads it: while a request head is awaited, every read
-    waits at most until the head's deadline (a head trickled a byte at a time is cut off
-    too); otherwise at most the idle timeout."""
+    """The connection as the handler reads it: first what the listener read already (the
+    request head, `prefetch`), then the socket.  While a request head is awaited, every
+    read waits at most until the head's deadline (a head trickled a byte at a time is cut
+    off too); otherwise at most the idle timeout.  `stop` makes it read nothing more (the
+    handler takes what is buffered back to the listener)."""
 
-    def __init__(self, handler: "ApiHandler"):
+    def __init__(self, handler: "ApiHandler", prefetch: bytes = b""):
         super().__init__()
         self.h = handler
+        self.prefetch = memoryview(prefetch)
+        self.stop = False
 
     def readable(self) -> bool:
         return True
 
-    def readinto(self, b) -> int:
+    def readinto(self, b) -> int | None:
         h = self.h
+        if len(self.prefetch):
+            n = min(len(b), len(self.prefetch))
+            b[:n] = self.prefetch[:n]
+            self.prefetch = self.prefetch[n:]
+            h._got += n
+            if h._raw is not None and len(h._raw) < RAW_HEAD_LIMIT:
+                h._raw += memoryview(b)[:n]
+            return n
+        if self.stop:
+            return None                      # "nothing now": the buffered reader stops here
         if h._deadline is not None:
             left = h._deadline - time.monotonic()
             if left <= 0:
@@ -134,15 +185,22 @@ class ApiHandler(BaseHTTPRequestHandler):
         self._deadline: float | None = None
         self._got = 0
         self._raw: bytearray | None = None
+        self.keep: bytes | None = None
         self.rfile.close()
-        self.rfile = io.BufferedReader(_Reader(self), 65536)
+        self._reader = _Reader(self, getattr(self, "_prefetch", b""))
+        self.rfile = io.BufferedReader(self._reader, 65536)
 
     def handle(self) -> None:
+        """One request.  A connection kept alive goes back to the listener with whatever
+        the client sent beyond this request (`keep`): waiting for its next request head
+        holds no thread."""
         self.close_connection = True
         try:
             self.handle_one_request()
-            while not self.close_connection:
-                self.handle_one_request()
+            if not self.close_connection:
+                self.wfile.flush()
+                self._reader.stop = True
+                self.keep = self.rfile.peek(0) + bytes(self._reader.prefetch)
         except GONE as exc:
             log.info("api %s: the client went away (%s)", self.client_address[0],
                      type(exc).__name__)
@@ -241,7 +299,8 @@ class ApiHandler(BaseHTTPRequestHandler):
 
     # -- logging ----------------------------------------------------------------------------------
     def log_message(self, fmt, *args) -> None:  # noqa: D401 - quiet; to the logger
-        log.debug("api %s " + fmt, self.client_address[0], *args)
+        log.debug("api %s " + fmt, self.client_address[0],
+                  *(_loggable(a) if isinstance(a, str) else a for a in args))
 
     def log_error(self, fmt, *args) -> None:
         log.info("api %s " + fmt, self.client_address[0], *args)
@@ -295,7 +354,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 if max_s is not None and now - start >= max_s:
                     break
                 state = {"printers": srv.printers(),
-                         "jobs": srv.jobs(("queued", "held", "printing"))}
+                         "jobs": self._out(srv.jobs(("queued", "held", "printing")))}
                 for kind, value in state.items():
                     if value != last.get(kind):
                         last[kind] = value
@@ -336,13 +395,64 @@ class ApiHandler(BaseHTTPRequestHandler):
         self._error(code, message, close=True)
 
     # -- requests ---------------------------------------------------------------------------------
-    def _authorised(self) -> bool:
+    def _identity(self) -> Identity | None:
+        """Who sent the request (docs/server.md "Users and roles"), None when its one
+        `Authorization: Bearer` token is nobody's: the operator's token (the `token` file),
+        or a user's (`users/NAME`).  An empty or short token is nobody's, whatever the
+        files say; every comparison takes constant time."""
         values = self.headers.get_all("Authorization") or []
         if len(values) != 1:
-            return False
+            return None
         scheme, _, token = values[0].partition(" ")
-        return scheme.lower() == "bearer" and hmac.compare_digest(
-            token.strip().encode(), self.srv.token.encode())
+        token = token.strip()
+        if scheme.lower() != "bearer" or len(token) < MIN_TOKEN or not token.isascii():
+            return None
+        mine = self.srv.token or ""
+        if len(mine) >= MIN_TOKEN and hmac.compare_digest(token.encode(), mine.encode()):
+            return Identity(None, OPERATOR)
+        users = getattr(self.server, "users", None)
+        name = users.lookup(token) if users is not None else None
+        return Identity(name, USER) if name else None
+
+    def _operator_only(self, what: str) -> None:
+        if not self.who.operator:
+            raise Invalid(f"{what} is for the operator: {self.who.shown()} may submit jobs, "
+                          f"read the queue and act on its own jobs", 403)
+
+    def _may_act(self, job_id: int, what: str) -> None:
+        """A user may act on its own jobs only (an operator on all): 403 otherwise."""
+        if self.who.operator:
+            return
+        job = self.srv.spool.get(job_id)
+        if job is None:
+            raise Invalid(f"no job {job_id}", 404)
+        owner = self.server.owners.get(job_id)
+        if not may_act(self.who, owner):
+            raise Invalid(f"job {job_id} belongs to {safe(owner) if owner else 'the operator'}"
+                          f": only its owner or an operator may {what} it (you are "
+                          f"{self.who.shown()})", 403)
+        members = job.get("nest_members")
+        if what == "cancel" and members:
+            ids = json.loads(members) if isinstance(members, str) else list(members)
+            owners = self.server.owners.of([{"id": i} for i in ids])
+            others = [i for i in ids if owners.get(i) != self.who.name]
+            if others:
+                raise Invalid(f"job {job_id}'s nested sheet holds jobs of others "
+                              f"({', '.join(map(str, others[:10]))}): only an operator may "
+                              f"cancel it", 403)
+
+    def _out(self, jobs: list[dict]) -> list[dict]:
+        """Jobs as the API shows them: with their `owner` and their `display_name` (the name
+        with invisible and reordering characters escaped; `name` is as it was sent)."""
+        owners = getattr(self.server, "owners", None)
+        found = owners.of(jobs) if owners is not None else {}
+        for j in jobs:
+            j["owner"] = found.get(j["id"])
+            j["display_name"] = safe(j["name"])
+        return jobs
+
+    def _job(self, job: dict) -> dict:
+        return {"job": self._out([self.srv.public(job)])[0]}
 
     def _body_length(self) -> int | None:
         """The body's length from its one Content-Length (None: no body announced).
@@ -402,10 +512,21 @@ class ApiHandler(BaseHTTPRequestHandler):
     def _dispatch(self, method: str) -> None:
         url = urlsplit(self.path)
         parts = [p for p in url.path.split("/") if p]
-        if not self._authorised():
+        self.who = self._identity()
+        if self.who is None:
             # nothing of an unauthorised request is read; the connection is closed
             return self._error(401, "missing or wrong bearer token (see the token file in "
-                               "the server's state directory)", close=True)
+                               "the server's state directory, or your user token)", close=True)
+        claimed = self.headers.get_all("X-Wideprint-User") or []
+        if claimed:
+            try:
+                if len(claimed) > 1:
+                    raise ValueError("given more than once")
+                name = claimed_name(claimed[0])
+            except ValueError as exc:
+                return self._error(400, f"bad X-Wideprint-User header: {exc}", close=True)
+            if self.who.operator:                 # a user is who its token says, whatever it says
+                self.who = Identity(name, OPERATOR)
         try:
             try:
                 self._length = self._body_length()
@@ -439,14 +560,15 @@ class ApiHandler(BaseHTTPRequestHandler):
                 newest = q.get("newest", "0")
                 if newest not in ("0", "1"):
                     raise Invalid("newest must be 0 or 1")
-                return self._json(200, {"jobs": self.srv.jobs(states, limit or None, after,
-                                                               newest == "1")})
+                return self._json(200, {"jobs": self._out(self.srv.jobs(
+                    states, limit or None, after, newest == "1"))})
             if method == "GET" and route == ["presets"]:
                 self._query(url.query, ())
                 presets = self.srv.presets
                 return self._json(200, dict(self.srv.preset_source.info(), presets=presets))
             if method == "POST" and route == ["presets", "reload"]:
                 self._query(url.query, ())
+                self._operator_only("re-reading the presets")
                 if body:
                     raise Invalid("reload takes no parameters")
                 return self._json(200, self.srv.reload_presets())
@@ -461,6 +583,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 return self._json(200, {"prints": self.srv.spool.prints(job)})
             if method == "POST" and route == ["queue"]:
                 self._query(url.query, ())
+                self._operator_only("pausing or resuming the queue")
                 if not isinstance(body, dict) or set(body) - {"paused"} or \
                         not isinstance(body.get("paused"), bool):
                     raise Invalid('expected {"paused": true|false}')
@@ -477,6 +600,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 return self._json(200, {"printers": self.srv.printers()})
             if method == "POST" and route == ["shutdown"]:
                 self._query(url.query, ())
+                self._operator_only("stopping the server")
                 if body:
                     raise Invalid("shutdown takes no parameters")
                 self._json(200, {"stopping": True})
@@ -484,6 +608,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 return
             if method == "POST" and route == ["estop"]:
                 self._query(url.query, ())
+                self._operator_only("the emergency stop")
                 return self._json(200, {"stopped": self.srv.estop()})
             if len(route) == 3 and route[:1] == ["printers"] and route[2] == "media.png" \
                     and method == "GET":
@@ -497,6 +622,7 @@ class ApiHandler(BaseHTTPRequestHandler):
             if len(route) == 3 and route[0] == "printers" and method == "POST":
                 self._query(url.query, ())
                 name, what = route[1], route[2]
+                self._operator_only(f"{what} of a printer")
                 worker = self.srv.printer_worker(name)
                 if what == "clear-fault":
                     if not isinstance(body, dict) or set(body) - {"then"}:
@@ -523,9 +649,10 @@ class ApiHandler(BaseHTTPRequestHandler):
                     job = self.srv.spool.get(job_id)
                     if job is None:
                         raise Invalid(f"no job {job_id}", 404)
-                    return self._json(200, {"job": self.srv.public(job)})
+                    return self._json(200, self._job(job))
                 if method == "PATCH" and len(route) == 2:
-                    return self._json(200, {"job": self.srv.public(self.srv.edit(job_id, body))})
+                    self._may_act(job_id, "edit")
+                    return self._json(200, self._job(self.srv.edit(job_id, body)))
                 if method == "GET" and len(route) == 3 and route[2] in ("preview", "preview.png"):
                     job = self.srv.spool.get(job_id)
                     if job is None:
@@ -540,13 +667,18 @@ class ApiHandler(BaseHTTPRequestHandler):
                     if not isinstance(body, dict) or set(body) != {"printer"} or \
                             not isinstance(body["printer"], (str, type(None))):
                         raise Invalid('expected {"printer": NAME|"any"}')
-                    return self._json(200, {"job": self.srv.public(self.srv.move(job_id, body["printer"]))})
+                    self._may_act(job_id, "move")
+                    return self._json(200, self._job(self.srv.move(job_id, body["printer"])))
                 if method == "POST" and len(route) == 3 and route[2] in ("cancel", "hold", "release",
                                                                           "requeue"):
                     if body:
                         raise Invalid(f"{route[2]} takes no parameters")
+                    self._may_act(job_id, route[2])
                     job = getattr(self.srv, route[2])(job_id)
-                    return self._json(200, {"job": self.srv.public(job)})
+                    if route[2] == "cancel" and job["state"] == "printing":
+                        # told to stop, not stopped yet: the client follows the job to its end
+                        return self._json(202, dict(self._job(job), cancelling=True))
+                    return self._json(200, self._job(job))
             raise Invalid(f"no such endpoint {method} {url.path[:80]}", 404)
         except Invalid as exc:
             return self._error(exc.status, str(exc))
@@ -556,6 +688,14 @@ class ApiHandler(BaseHTTPRequestHandler):
             raise                                      # the connection's end: handled above
         except ValueError as exc:
             return self._error(400, str(exc))
+        except (sqlite3.OperationalError, OSError) as exc:
+            why = storage_full(exc)
+            if why is None:
+                log.exception("api %s %s %s", self.client_address[0], method, _shown(self.path))
+                return self._error(500, f"internal error: {type(exc).__name__}: {exc}",
+                                   close=True, quiet=True)
+            log.error("api %s %s %s: %s", self.client_address[0], method, _shown(self.path), exc)
+            return self._error(507, why, close=bool(self._body_left), quiet=True)
         except Exception as exc:  # noqa: BLE001 - a bug: the client still gets an answer
             log.exception("api %s %s %s", self.client_address[0], method, _shown(self.path))
             return self._error(500, f"internal error: {type(exc).__name__}: {exc}", close=True,
@@ -598,15 +738,26 @@ class ApiHandler(BaseHTTPRequestHandler):
             return self._error(exc.status, str(exc), close=True)
         except (TimeoutError, *GONE):
             raise
-        except OSError as exc:                        # the spool's disk: full, read-only, ...
+        except (OSError, sqlite3.OperationalError) as exc:  # the spool's disk: full, read-only
+            why = storage_full(exc)
+            if why is None and isinstance(exc, sqlite3.OperationalError):
+                raise
             log.error("api: cannot spool %s: %s", req["name"], exc)
-            return self._error(507, f"the server cannot store the file: {exc.strerror or exc}",
-                               close=True, quiet=True)
+            return self._error(507, why or f"the server cannot store the file: "
+                               f"{exc.strerror or exc}", close=True, quiet=True)
         self._body_left = 0
         if not created:
-            return self._json(200, {"job": srv.public(job), "duplicate": True})
+            return self._json(200, dict(self._job(job), duplicate=True))
+        owner = self.who.name
+        if owner is not None:
+            try:
+                self.server.owners.set(job["id"], owner)
+            except (OSError, sqlite3.OperationalError) as exc:
+                # queued, but its owner not recorded: the operator's job alone (fails closed)
+                log.error("job %s: its owner %s could not be recorded (%s): only an operator "
+                          "may act on it", job["id"], owner, exc)
         srv.notify()
-        self._json(201, {"job": srv.public(job), "duplicate": False})
+        self._json(201, dict(self._job(job), duplicate=False))
 
     def do_GET(self):
         self._dispatch("GET")
@@ -622,135 +773,358 @@ class ApiHandler(BaseHTTPRequestHandler):
 
 
 # -- the listener -----------------------------------------------------------------------------------
+def _answer(status: int, message: str, extra: dict | None = None) -> bytes:
+    """A whole error answer (JSON, connection closed), as the listener sends it itself."""
+    body = (json.dumps({"error": message}) + "\n").encode()
+    head = [f"HTTP/1.1 {status} {HTTPStatus(status).phrase}", "Content-Type: application/json",
+            "Cache-Control: no-store", "Connection: close", f"Content-Length: {len(body)}"]
+    head += [f"{k}: {v}" for k, v in (extra or {}).items()]
+    return ("\r\n".join(head) + "\r\n\r\n").encode() + body
+
+
 def _busy_answer(limit: int) -> bytes:
-    body = (json.dumps({"error": f"the server is busy ({limit} connections open, the limit); "
-                                 "try again"}) + "\n").encode()
-    return (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\n"
-            b"Cache-Control: no-store\r\nRetry-After: 1\r\nConnection: close\r\n"
-            + f"Content-Length: {len(body)}\r\n\r\n".encode() + body)
+    return _answer(503, f"the server is busy ({limit} requests being served, the limit); "
+                        "try again", {"Retry-After": "1"})
 
 
-class _HTTPServer(ThreadingHTTPServer):
-    """One thread per connection, at most `max_connections` of them; a connection beyond
-    that gets 503 (Retry-After: 1) at once from one small thread and is closed."""
+HEAD_LIMIT = 256 * 1024                 # a request head larger than this: 431
+LIGHT = re.compile(rb"(?im)^(?:content-length[ \t]*:[ \t]*0*[1-9]|content-length[ \t]*:[ \t]*[^0-9\s]"
+                   rb"|transfer-encoding[ \t]*:)")
 
-    daemon_threads = True
+
+class _Head:
+    """A connection whose request head is being read by the listener (no thread): its
+    bytes so far, where the scan for the head's end stopped, and its deadline."""
+
+    __slots__ = ("sock", "addr", "deadline", "buf", "pos", "searched", "empties", "lines",
+                 "phase")
+
+    def __init__(self, sock, addr, deadline: float, data: bytes = b""):
+        self.sock, self.addr, self.deadline = sock, addr, deadline
+        self.buf = bytearray(data)
+        self.pos = self.searched = self.empties = self.lines = self.phase = 0
+
+    def scan(self) -> str:
+        """"ready": a thread can take the request without waiting for the client (the head
+        is complete, or malformed in a way the handler answers from what is here: too many
+        blank lines, a line over MAX_LINE, more than 100 header lines); "large": more than
+        HEAD_LIMIT and not complete (431); "more": keep reading.  Incremental: each byte is
+        looked at once, however the head trickles in."""
+        buf = self.buf
+        while True:
+            nl = buf.find(b"\n", max(self.pos, self.searched))
+            if nl < 0:
+                self.searched = len(buf)
+                if len(buf) - self.pos > MAX_LINE:
+                    return "ready"
+                return "large" if len(buf) > HEAD_LIMIT else "more"
+            line_end, start = nl + 1, self.pos
+            self.pos = self.searched = line_end
+            blank = line_end - start <= 2 and buf[start:line_end] in (b"\n", b"\r\n")
+            if self.phase == 0:                     # before the request line
+                if blank:
+                    self.empties += 1
+                    if self.empties > 4:            # the handler skips four
+                        return "ready"
+                    continue
+                self.phase = 1
+                continue
+            if blank:
+                return "ready"                      # the end of the head
+            self.lines += 1
+            if self.lines > 100:
+                return "ready"
+            if len(buf) > HEAD_LIMIT:
+                return "large"
+
+    def light(self) -> bool:
+        """A GET without a body that ends at once (not an event stream): such requests may
+        use the threads kept for them, which bodies and streams cannot take."""
+        first = bytes(self.buf[:self.pos]).lstrip(b"\r\n").split(b"\r\n", 1)[0].split(b"\n", 1)[0]
+        words = first.split()
+        if len(words) != 3 or words[0] != b"GET" or words[1].startswith(b"/v1/events"):
+            return False
+        return LIGHT.search(self.buf, 0, self.pos) is None
+
+
+class _HTTPServer(socketserver.TCPServer):
+    """The API's listener (docs/server.md, "The API: the rules").  One thread (the
+    selector) accepts connections and reads their request heads without a thread each; a
+    complete head goes to a handler thread, at most `max_connections` at once, of which
+    requests with a body and event streams may take all but a quarter (kept for plain
+    GETs, so slow uploads cannot lock out a status call); a request beyond that gets 503
+    (Retry-After: 1) at once.  A kept-alive connection comes back to the selector to await
+    its next head.  A head must arrive within the idle timeout of the connection's start
+    (or of the previous answer): 408 then (silence: closed without a word); one beyond
+    HEAD_LIMIT: 431.  Waiting heads cost a socket and their bytes, no thread: when more
+    wait than the process's file descriptors allow, the oldest is closed."""
+
     allow_reuse_address = True
-    request_queue_size = 64
-    REJECT_WAIT_S = 0.5              # a refused client's request head is waited for this long
+    request_queue_size = 1024
+    REJECT_WAIT_S = 0.5              # a refused client is given this long to read and close
 
     def __init__(self, address, handler, max_connections: int = 32):
         super().__init__(address, handler)
+        srv = getattr(handler, "srv", None)
+        self.idle = float(getattr(getattr(srv, "config", None), "api_timeout_s",
+                                  DEFAULT_API_TIMEOUT_S))
+        if srv is not None:
+            add_secret(getattr(srv, "token", "") or "")
+            self.users = Users(srv.state_dir, getattr(srv, "token", None))
+            self.owners = Owners(srv.spool)
         self.max_connections = max(1, int(max_connections))
-        self._slots = threading.BoundedSemaphore(self.max_connections)
+        self.max_heavy = max(1, self.max_connections - self.max_connections // 4)
         self._busy = _busy_answer(self.max_connections)
-        self._rejects: queue.Queue = queue.Queue(maxsize=max(8, self.max_connections))
-        self._closing = threading.Event()
-        self._refused = 0
-        self._refused_logged = 0.0
-        self._rejecter = threading.Thread(target=self._reject_loop, name="wideprint-api-busy",
-                                          daemon=True)
-        self._rejecter.start()
+        self._count = self._heavy = 0
+        self._slots = threading.Lock()
+        self._back: queue.SimpleQueue = queue.SimpleQueue()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self._stop = threading.Event()
+        self._done = threading.Event()
+        self._done.set()
+        self.max_waiting = self._fd_room()
+        self._warned: dict[str, list] = {}
 
-    def process_request(self, request, client_address) -> None:
-        if self._slots.acquire(blocking=False):
-            t = threading.Thread(target=self._serve, args=(request, client_address),
-                                 name="wideprint-api-conn", daemon=True)
-            try:
-                t.start()
-            except RuntimeError as exc:                  # no thread to be had
-                self._slots.release()
-                log.warning("api: cannot start a thread (%s); connection closed", exc)
-                self.shutdown_request(request)
-            return
-        self._refused += 1
+    def _fd_room(self) -> int:
+        """How many connections may wait for their head: the process's file descriptors
+        (its soft limit raised to the hard one, at most 65536) less a margin."""
+        try:
+            import resource
+            soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+            want = 65536 if hard == resource.RLIM_INFINITY else min(hard, 65536)
+            if soft != resource.RLIM_INFINITY and soft < want:
+                resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+                soft = want
+        except (ImportError, ValueError, OSError):
+            soft = 1024
+        return max(16, min(16384, (soft if soft > 0 else 1024) - 128 - 2 * self.max_connections))
+
+    def _warn(self, what: str, fmt: str) -> None:
+        """At most one warning in ten seconds for each kind, with the count since the last."""
+        w = self._warned.setdefault(what, [0.0, 0])
+        w[1] += 1
         now = time.monotonic()
-        if now - self._refused_logged >= 10:
-            log.warning("api: %d connections open, the limit: %d connection(s) answered 503",
-                        self.max_connections, self._refused)
-            self._refused_logged, self._refused = now, 0
-        try:
-            self._rejects.put_nowait(request)
-        except queue.Full:
-            self.shutdown_request(request)             # even the refusals queue is full
+        if now - w[0] >= 10:
+            log.warning(fmt, w[1])
+            w[0], w[1] = now, 0
 
-    def _serve(self, request, client_address) -> None:
-        try:
-            self.process_request_thread(request, client_address)
-        finally:
-            self._slots.release()
-
-    def _reject_loop(self) -> None:
-        """Answers 503 to the connections beyond the limit, all of them at once (one
-        selector): a connection's request head is read for at most REJECT_WAIT_S (so that
-        closing it does not reset the answer away), answered, then drained for at most as
-        long and closed."""
+    # -- the selector thread --------------------------------------------------------------------
+    def serve_forever(self, poll_interval: float = 0.5) -> None:
+        self._done.clear()
         sel = selectors.DefaultSelector()
-        pending: dict = {}                         # socket -> [phase, deadline, head]
+        heads: dict = {}                       # socket -> _Head, in deadline order
+        draining: dict = {}                    # socket -> deadline (answered, closing)
+        self.socket.setblocking(False)
+        sel.register(self.socket, selectors.EVENT_READ, "listen")
+        sel.register(self._wake_r, selectors.EVENT_READ, "wake")
 
-        def drop(sock) -> None:
-            pending.pop(sock, None)
+        def forget(sock) -> None:
+            heads.pop(sock, None)
+            draining.pop(sock, None)
             try:
                 sel.unregister(sock)
             except (KeyError, ValueError):
                 pass
-            sock.close()
 
-        def answer(sock) -> None:
+        def close(sock) -> None:
+            forget(sock)
             try:
-                sock.send(self._busy)                # small: fits the socket's buffer
+                sock.close()
+            except OSError:
+                pass
+
+        def answer_and_close(sock, data: bytes) -> None:
+            forget(sock)
+            try:
+                sock.send(data)                      # small: fits the socket's buffer
                 sock.shutdown(socket.SHUT_WR)
             except OSError:
-                return drop(sock)
-            pending[sock] = ["drain", time.monotonic() + self.REJECT_WAIT_S, b""]
+                return close(sock)
+            draining[sock] = time.monotonic() + self.REJECT_WAIT_S
+            sel.register(sock, selectors.EVENT_READ, "drain")
 
-        while not self._closing.is_set():
+        def hand_over(h: _Head) -> None:
+            forget(h.sock)
+            heavy = not h.light()
+            with self._slots:
+                ok = self._count < self.max_connections and (not heavy or
+                                                             self._heavy < self.max_heavy)
+                if ok:
+                    self._count += 1
+                    self._heavy += heavy
+            if not ok:
+                self._warn("busy", f"api: {self.max_connections} requests being served, the "
+                                   f"limit: %d request(s) answered 503")
+                return answer_and_close(h.sock, self._busy)
+            t = threading.Thread(target=self._serve, args=(h, heavy), name="wideprint-api-conn",
+                                 daemon=True)
             try:
-                sock = self._rejects.get(timeout=0.05 if pending else 0.5)
-            except queue.Empty:
-                sock = None
-            while sock is not None:
+                t.start()
+            except RuntimeError as exc:                  # no thread to be had
+                self._release(heavy)
+                log.warning("api: cannot start a thread (%s); connection closed", exc)
+                close(h.sock)
+
+        def add(sock, addr, data: bytes) -> None:
+            try:
+                sock.setblocking(False)
+                h = _Head(sock, addr, time.monotonic() + self.idle, data)
+                sel.register(sock, selectors.EVENT_READ, h)
+            except (OSError, ValueError):
+                return close(sock)
+            heads[sock] = h
+            verdict = h.scan() if data else "more"
+            if verdict != "more":
+                return examine(h, verdict)
+            while len(heads) > self.max_waiting:       # the oldest waiting head goes
+                old = next(iter(heads.values()))
+                self._warn("shed", f"api: more than {self.max_waiting} connections waiting for "
+                                   f"their request head: %d of the oldest closed")
+                close(old.sock)
+
+        def examine(h: _Head, verdict: str) -> None:
+            if verdict == "ready":
+                return hand_over(h)
+            if verdict == "large":
+                log.info("api %s: request head larger than %d bytes; closed", h.addr[0],
+                         HEAD_LIMIT)
+                return answer_and_close(h.sock, _answer(431, f"request head larger than "
+                                                             f"{HEAD_LIMIT} bytes"))
+
+        def read(h: _Head) -> None:
+            try:
+                data = h.sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                log.debug("api %s: the client went away (%s)", h.addr[0], type(exc).__name__)
+                return close(h.sock)
+            if not data:                               # the client closed its side
+                if h.buf.strip():
+                    return hand_over(h)                # what it sent is answered
+                return close(h.sock)
+            h.buf += data
+            examine(h, h.scan())
+
+        def expire(h: _Head) -> None:
+            if h.buf.strip():
+                why = f"request head not complete within {self.idle:g} s"
+                log.info("api %s: %s; closed", h.addr[0], why)
+                answer_and_close(h.sock, _answer(408, why))
+            else:
+                log.debug("api %s: idle connection closed after %g s", h.addr[0], self.idle)
+                close(h.sock)
+
+        def accept() -> None:
+            for _ in range(256):
                 try:
-                    sock.setblocking(False)
-                    sel.register(sock, selectors.EVENT_READ)
-                    pending[sock] = ["head", time.monotonic() + self.REJECT_WAIT_S, b""]
-                except (OSError, ValueError):
-                    sock.close()
-                try:
-                    sock = self._rejects.get_nowait()
-                except queue.Empty:
-                    sock = None
-            if not pending:
-                continue
-            for key, _ in sel.select(timeout=0.05):
-                sock = key.fileobj
-                state = pending.get(sock)
-                if state is None:
-                    continue
-                try:
-                    data = sock.recv(MAX_LINE)
-                except BlockingIOError:
-                    continue
-                except OSError:
-                    drop(sock)
-                    continue
-                if state[0] == "drain":
-                    if not data:
-                        drop(sock)                   # the client read the answer and closed
-                    continue
-                state[2] += data
-                if not data or b"\r\n\r\n" in state[2] or len(state[2]) >= MAX_LINE:
-                    answer(sock)
-            now = time.monotonic()
-            for sock, state in list(pending.items()):
-                if now >= state[1]:
-                    if state[0] == "head":
-                        answer(sock)
+                    sock, addr = self.socket.accept()
+                except (BlockingIOError, InterruptedError):
+                    return
+                except OSError as exc:                 # out of descriptors (EMFILE, ENFILE)
+                    self._warn("accept", f"api: cannot accept connections ({exc.strerror}): "
+                                         f"%d time(s); the oldest waiting one closed")
+                    if heads:
+                        close(next(iter(heads)))
                     else:
-                        drop(sock)
-        for sock in list(pending):
-            drop(sock)
-        sel.close()
+                        time.sleep(0.05)
+                    return
+                add(sock, addr, b"")
+
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                due = [next(iter(heads.values())).deadline] if heads else []
+                if draining:
+                    due.append(next(iter(draining.values())))
+                first = min(due, default=now + poll_interval)
+                for key, _ in sel.select(max(0.0, min(poll_interval, first - now))):
+                    kind = key.data
+                    if kind == "listen":
+                        accept()
+                    elif kind == "wake":
+                        try:
+                            while self._wake_r.recv(4096):
+                                pass
+                        except (BlockingIOError, InterruptedError):
+                            pass
+                    elif kind == "drain":
+                        sock = key.fileobj
+                        try:
+                            if not sock.recv(65536):
+                                close(sock)            # the client read the answer and closed
+                        except (BlockingIOError, InterruptedError):
+                            pass
+                        except OSError:
+                            close(sock)
+                    elif key.fileobj in heads:
+                        read(kind)
+                while True:                            # kept-alive connections, back
+                    try:
+                        sock, addr, data = self._back.get_nowait()
+                    except queue.Empty:
+                        break
+                    add(sock, addr, data)
+                now = time.monotonic()
+                while heads:
+                    h = next(iter(heads.values()))
+                    if h.deadline > now:
+                        break
+                    expire(h)
+                while draining:
+                    sock, deadline = next(iter(draining.items()))
+                    if deadline > now:
+                        break
+                    close(sock)
+        finally:
+            for sock in list(heads) + list(draining):
+                close(sock)
+            while True:
+                try:
+                    self._back.get_nowait()[0].close()
+                except queue.Empty:
+                    break
+            for sock in (self.socket, self._wake_r):
+                try:
+                    sel.unregister(sock)
+                except (KeyError, ValueError):
+                    pass
+            sel.close()
+            self._done.set()
+
+    def _wake(self) -> None:
+        try:
+            self._wake_w.send(b"x")
+        except OSError:
+            pass                                 # full: it is awake already
+
+    def _release(self, heavy: bool) -> None:
+        with self._slots:
+            self._count -= 1
+            self._heavy -= heavy
+
+    # -- a handler thread -------------------------------------------------------------------------
+    def _serve(self, h: _Head, heavy: bool) -> None:
+        sock, keep = h.sock, None
+        try:
+            sock.setblocking(True)
+            sock.settimeout(self.idle)
+            cls = self.RequestHandlerClass
+            handler = cls.__new__(cls)
+            handler._prefetch = bytes(h.buf)
+            handler.__init__(sock, h.addr, self)
+            keep = handler.keep
+        except Exception:  # noqa: BLE001 - logged by handle_error, the thread goes on
+            self.handle_error(sock, h.addr)
+        finally:
+            self._release(heavy)
+            if keep is not None and not self._stop.is_set():
+                self._back.put((sock, h.addr, keep))
+                self._wake()
+            else:
+                self.shutdown_request(sock)
 
     def handle_error(self, request, client_address) -> None:
         exc = sys.exc_info()[1]
@@ -759,11 +1133,14 @@ class _HTTPServer(ThreadingHTTPServer):
         else:
             log.error("api %s: unexpected error", client_address[0], exc_info=True)
 
+    def shutdown(self) -> None:
+        self._stop.set()
+        self._wake()
+        self._done.wait()
+
     def server_close(self) -> None:
-        self._closing.set()
+        self._stop.set()
+        self._wake()
         super().server_close()
-        while True:
-            try:
-                self._rejects.get_nowait().close()
-            except queue.Empty:
-                break
+        for sock in (self._wake_r, self._wake_w):
+            sock.close()

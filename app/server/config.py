@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
 import secrets
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,16 +49,121 @@ def default_state_dir() -> Path:
         return Path.home() / ".local" / "state" / "wideprint"
 
 
-def ensure_token(state_dir: Path) -> str:
-    """The API token: created 0600 on first start, read by clients."""
-    path = state_dir / TOKEN_FILE
+MIN_TOKEN = 32                             # characters: a shorter token file is refused
+MAX_TOKEN_FILE = 4096                      # bytes: a token file larger than this is refused
+TOKEN_CHARS = re.compile(r"^[A-Za-z0-9._~+/=-]+$")    # RFC 6750 token68
+
+
+class TokenError(ValueError):
+    """A token file the server will not use (the message names the file and the fix)."""
+
+
+def read_token_file(path: Path, fix_mode: bool = True) -> str:
+    """A bearer token from its file, checked (docs/server.md "Users and roles"): a regular
+    file (not a symbolic link), UTF-8 text of at least MIN_TOKEN characters from the bearer
+    token alphabet, with nothing else but a final line end.  A file readable by group or
+    others is made 0600 with a warning (fix_mode), or refused when it cannot be.  Anything
+    else raises TokenError naming the file: an empty, short, binary or unreadable token file
+    must never turn authentication off or into a guess."""
+    fix = (f"delete it and the server makes a new one at its next start (clients read "
+           f"the new one), or write a token of {MIN_TOKEN} or more characters "
+           f"(letters, digits, -._~+/=) into it")
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    except FileExistsError:
-        return path.read_text().strip()
-    token = secrets.token_urlsafe(32)
-    with os.fdopen(fd, "w") as f:
-        f.write(token + "\n")
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise TokenError(f"the token file {path} is a symbolic link: refused") from None
+        raise TokenError(f"the token file {path} cannot be read ({exc.strerror}): fix its "
+                         f"owner or mode (0600, the server's user)") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise TokenError(f"the token file {path} is not a regular file: {fix}")
+        mode = stat.S_IMODE(st.st_mode)
+        if mode & 0o077:
+            if not fix_mode:
+                raise TokenError(f"the token file {path} is readable by others (mode "
+                                 f"{mode:04o}): make it 0600")
+            try:
+                os.fchmod(fd, 0o600)
+            except OSError as exc:
+                raise TokenError(f"the token file {path} is readable by others (mode "
+                                 f"{mode:04o}) and cannot be made 0600 ({exc.strerror})") from None
+            log.warning("the token file %s was readable by others (mode %04o): made 0600; "
+                        "anyone who read it meanwhile can use the API (delete the file to "
+                        "make a new token)", path, mode)
+        data = os.read(fd, MAX_TOKEN_FILE + 1)
+    except OSError as exc:
+        raise TokenError(f"the token file {path} cannot be read ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_TOKEN_FILE:
+        raise TokenError(f"the token file {path} is not a token (larger than "
+                         f"{MAX_TOKEN_FILE} bytes): {fix}")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise TokenError(f"the token file {path} is not text (binary or not UTF-8): "
+                         f"{fix}") from None
+    token = text.strip()
+    if not token:
+        raise TokenError(f"the token file {path} is empty: {fix}")
+    if any(ch.isspace() for ch in token):
+        raise TokenError(f"the token file {path} holds blanks or several lines: {fix}")
+    if not TOKEN_CHARS.match(token):
+        raise TokenError(f"the token file {path} holds characters a bearer token cannot "
+                         f"have: {fix}")
+    if len(token) < MIN_TOKEN:
+        raise TokenError(f"the token file {path} is too short ({len(token)} characters, "
+                         f"at least {MIN_TOKEN}): {fix}")
+    return token
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(32)                  # 43 characters, 256 bits
+
+
+def write_token_file(path: Path, token: str, replace: bool = False) -> None:
+    """Write a token file whole or not at all: a temporary file (0600), fsync'd, then
+    linked to its name (FileExistsError if it exists and not `replace`) or renamed over
+    it, and the directory fsync'd — a crash never leaves an empty token file behind."""
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(token + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        if replace:
+            os.replace(tmp, path)
+        else:
+            os.link(tmp, path)
+    finally:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+    _fsync_dir(path.parent)
+
+
+def ensure_token(state_dir: Path) -> str:
+    """The API's operator token (the `token` file): made on first start (0600, written
+    whole), else read and checked (`read_token_file`: TokenError naming the file for an
+    empty, short, binary or unreadable one; made 0600 with a warning when others could read
+    it)."""
+    path = Path(state_dir) / TOKEN_FILE
+    try:
+        return read_token_file(path)
+    except FileNotFoundError:
+        pass
+    token = new_token()
+    try:
+        write_token_file(path, token)
+    except FileExistsError:                 # made meanwhile by someone else: theirs counts
+        return read_token_file(path)
+    log.info("made a new API token in %s", path)
     return token
 
 

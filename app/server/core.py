@@ -305,7 +305,14 @@ class PrintServer:
         pos = self.spool.queue_position()
         return [self.public(j, pos) for j in self.spool.jobs(states, limit, after, newest)]
 
-    def cancel(self, job_id: int) -> dict:
+    CANCEL_WAIT_S = 5.0               # a printing job's cancel waits this long for it to stop
+
+    def cancel(self, job_id: int, _again: bool = True) -> dict:
+        """Cancel a job: a waiting one at once; a printing one is stopped at the printer and
+        waited for (CANCEL_WAIT_S).  Returns the job: `cancelled`, or still `printing` when
+        it has not stopped yet (the API answers 202: the client follows it).  A job that
+        ended otherwise meanwhile (done, failed) raises Invalid (409): the cancel did not
+        happen, and the caller is told so."""
         before = self.spool.get(job_id)
         keep = self.keeps_copy("cancelled")
         job = self.spool.cancel_waiting(job_id, keep_copy=keep)
@@ -314,12 +321,19 @@ class PrintServer:
                 # claimed but not started yet, or between copies: the workers check this set
                 for w in self.workers.values():
                     w._cancel.add(job_id)
-            deadline = time.monotonic() + 10
-            while time.monotonic() < deadline:
+            deadline = time.monotonic() + self.CANCEL_WAIT_S
+            while True:
                 job = self.spool.get(job_id)
-                if job["state"] != "printing":
+                if job["state"] != "printing" or time.monotonic() >= deadline:
                     break
                 time.sleep(0.05)
+            if job["state"] in ("queued", "held") and _again:
+                # it stopped for another reason meanwhile (the link, a fault): cancel it waiting
+                return self.cancel(job_id, _again=False)
+            if job["state"] in ("done", "failed"):
+                raise Invalid(f"job {job_id} is {job['state']}: it ended before the cancel "
+                              f"reached the printer" + (f" ({job['message']})"
+                                                        if job["message"] else ""), 409)
             return job
         self.hot_done(job, "cancelled", "cancelled by the operator")
         for m in self.spool.members(job):        # a nested sheet not started: its jobs too
