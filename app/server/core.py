@@ -552,7 +552,7 @@ class PrintServer:
                             paper_mm=w.paper_mm, printable_mm=round(w.printable_mm(), 1),
                             media=None if live is None or live.job is None else
                             dict(job=live.job, version=live.version),
-                            state=w.printer_state, error=w.printer_error, fault=w.fault or None,
+                            state=w.printer_state, error=w.disk_wait or w.printer_error, fault=w.fault or None,
                             paused=w.paused, reason=w.pause_reason, capped=w.capped,
                             current=cur))
         return out

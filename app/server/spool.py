@@ -111,6 +111,16 @@ RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
                    ("prints", "passes_printed", "strokes_printed"))
 
 
+def disk_full(exc: BaseException) -> bool:
+    """Whether an error is the state directory's disk (or quota) being full: SQLite's
+    SQLITE_FULL, or ENOSPC/EDQUOT from a write.  Never a job's fault: the worker waits for
+    space (docs/server.md "Full disks"), the API answers 507."""
+    import errno
+    if isinstance(exc, sqlite3.OperationalError):
+        return "full" in str(exc).lower()
+    return isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
 class SpoolError(Exception):
     """A request the queue refuses (the message says why); `status` is the HTTP code."""
 

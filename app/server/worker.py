@@ -14,7 +14,7 @@ import time
 from typing import TYPE_CHECKING
 
 from . import crashpoints, fsck
-from .spool import COLORS
+from .spool import COLORS, disk_full
 from .validate import rip_settings, with_icc_paths
 
 if TYPE_CHECKING:
@@ -25,6 +25,12 @@ log = logging.getLogger("wideprint.server")
 # printer job ids of test prints: above every spool job id (docs/server.md, "Test prints")
 TEST_PRINT_BASE = 0x8000_0000
 CARE_RETRY_S = 30.0                  # idle head care on a printer that did not answer
+DISK_RETRY_S = (0.5, 30.0)           # a full state disk: first wait, longest wait (doubling)
+
+
+class DiskFull(Exception):
+    """The server is stopping while a state change waits for disk space: nothing was
+    recorded, and the next start recovers from what was (docs/server.md "Full disks")."""
 
 
 # -- the worker -------------------------------------------------------------------------------
@@ -41,6 +47,7 @@ class Worker(threading.Thread):
         self.profile = profile if profile is not None else server.profile
         self.spool = server.spool
         self.fault = ""                    # the printer fault that stopped this printer
+        self.disk_wait = ""                # a state change waiting for disk space (why)
         self.wake = threading.Condition()
         self.paused = server.config.start_paused
         self.pause_reason = "started paused" if self.paused else ""
@@ -63,6 +70,36 @@ class Worker(threading.Thread):
         self._test_ids = 0
         self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
+
+    # -- recording state changes on a disk that may be full ----------------------------------
+    def _durable(self, write, what: str):
+        """A state change the worker must record (claim, a copy's end, the job's end ...):
+        retried with back-off while the state directory's disk is full — never given up
+        for a job's failure, never a busy loop — until it commits (docs/server.md "Full
+        disks").  Other errors pass.  Raises DiskFull when the server stops meanwhile."""
+        delay = DISK_RETRY_S[0]
+        warned = False
+        while True:
+            try:
+                out = write()
+            except Exception as exc:  # noqa: BLE001 - only a full disk is waited for
+                if not disk_full(exc):
+                    raise
+                if not warned:
+                    log.warning("printer %s: cannot record %s: the state directory's disk is "
+                                "full (%s); waiting for space, retrying", self.name_, what, exc)
+                    warned = True
+                self.disk_wait = f"waiting for disk space to record {what}"
+                if self.stopping:
+                    raise DiskFull(f"{what} not recorded: the disk is full") from None
+                with self.wake:
+                    self.wake.wait(delay)
+                delay = min(delay * 2, DISK_RETRY_S[1])
+                continue
+            if warned:
+                log.info("printer %s: %s recorded: disk space is back", self.name_, what)
+            self.disk_wait = ""
+            return out
 
     # control from other threads
     def notify(self) -> None:
@@ -241,7 +278,16 @@ class Worker(threading.Thread):
                 continue
             try:
                 self._run_job(job["id"])
+            except DiskFull as exc:
+                log.warning("printer %s: job %s: %s; the next start goes on from what was "
+                            "recorded", self.name_, job["id"], exc)
             except Exception as exc:  # noqa: BLE001 - never let one job end the server
+                if disk_full(exc):           # not the job's failure: wait for space
+                    log.warning("printer %s: job %s: the state directory's disk is full (%s); "
+                                "waiting", self.name_, job["id"], exc)
+                    with self.wake:
+                        self.wake.wait(DISK_RETRY_S[1] / 4)
+                    continue
                 log.exception("job %s", job["id"])
                 try:
                     self._finish(self.spool.get(job["id"]), "failed", f"internal error: {exc}")
@@ -427,7 +473,8 @@ class Worker(threading.Thread):
 
     def _offline(self, job_id: int, message: str) -> None:
         self.printer_state, self.printer_error = "offline", message
-        self.spool.wait_for_printer(job_id, f"waiting for the printer: {message}")
+        self._durable(lambda: self.spool.wait_for_printer(job_id, f"waiting for the printer: {message}"),
+                      f"job {job_id} waiting for the printer")
         log.warning("printer offline: %s (retrying in %.1f s)", message, self._backoff)
         with self.wake:
             self.wake.wait(self._backoff)
@@ -441,7 +488,7 @@ class Worker(threading.Thread):
         from ...driver.stream import StreamError
 
         self._fresh_profile()
-        job = self.spool.claim(job_id, self.name_)
+        job = self._durable(lambda: self.spool.claim(job_id, self.name_), f"job {job_id}'s start")
         if job is None:
             return
         crashpoints.reached("claim")
@@ -457,7 +504,7 @@ class Worker(threading.Thread):
         while job["copies_done"] < job["copies"]:
             copy = job["copies_done"] + 1
             if not first:
-                self.spool.start_copy(job_id)
+                self._durable(lambda: self.spool.start_copy(job_id), f"job {job_id}'s next copy")
                 job = self.spool.get(job_id)
                 resumed = False
             self.current.update(copy=copy, state="ripping", stroke_index=None, strokes_printed=0)
@@ -503,9 +550,8 @@ class Worker(threading.Thread):
                 def on_event(kind, **kw):
                     cur = self.current
                     if kind == "checkpoint":
-                        self.spool.save_checkpoint(job_id, dict(kw["checkpoint"], epoch=epoch,
-                                                                copy=copy),
-                                                   pj.report.strokes_total)
+                        self._save_checkpoint(job_id, dict(kw["checkpoint"], epoch=epoch,
+                                                           copy=copy), pj.report.strokes_total)
                         crashpoints.reached("job_end" if kw["checkpoint"].get("ended")
                                             else "checkpoint")
                         cur["strokes_printed"] = kw["checkpoint"].get("next_stroke", 0)
@@ -538,9 +584,10 @@ class Worker(threading.Thread):
                     msg = (f"{exc}; held: release it to print it again from its first stroke, "
                            f"or cancel it" if hold else
                            f"{exc}; printing it again from its first stroke")
-                    self.spool.restart(job_id, msg, self._print_row(
-                        job, copy, started, pj.report, "interrupted", str(exc), resumed)
-                        if exc.on_sheet else None, hold)
+                    row = self._print_row(job, copy, started, pj.report, "interrupted",
+                                          str(exc), resumed) if exc.on_sheet else None
+                    self._durable(lambda: self.spool.restart(job_id, msg, row, hold),
+                                  f"job {job_id}'s restart")
                     log.warning("job %s: %s", job_id, msg)
                     return
                 except JobError as exc:
@@ -552,8 +599,10 @@ class Worker(threading.Thread):
                     if exc.fault and not self.stopping:
                         # the printer's fault, not the job's: this printer stops at the job,
                         # which keeps its checkpoint until the operator clears the fault
-                        self.spool.stop_for_fault(job_id, str(exc), self._print_row(
-                            job, copy, started, pj.report, "stopped", str(exc), resumed))
+                        row = self._print_row(job, copy, started, pj.report, "stopped",
+                                              str(exc), resumed)
+                        self._durable(lambda: self.spool.stop_for_fault(job_id, str(exc), row),
+                                      f"job {job_id}'s stop")
                         self.fault = str(exc)
                         self.printer_state, self.printer_error = "fault", str(exc)
                         self.set_paused(True, f"printer fault: {exc}; clear it to resume or fail the job")
@@ -571,7 +620,8 @@ class Worker(threading.Thread):
             self._measure_paper()
             row = self._print_row(job, copy, started, rep, "done", "", resumed)
             if copy < job["copies"]:
-                job = self.spool.copy_done(job_id, row)
+                job = self._durable(lambda: self.spool.copy_done(job_id, row),
+                                    f"job {job_id}'s copy {copy}")
                 crashpoints.reached("copy_done")
                 continue
             from ...rip.layout import layout_line
@@ -580,6 +630,22 @@ class Worker(threading.Thread):
             self._finish(job, "done", layout_line(layout) if layout else "", row, copy_done=True)
             return
         self._finish(job, "done", "")          # every copy was done before a restart
+
+    def _save_checkpoint(self, job_id: int, checkpoint: dict, strokes_total: int) -> None:
+        """A stroke's checkpoint; on a full disk the print goes on without it (one warning a
+        job): a restart then resumes from an older checkpoint, which the printer does not
+        confirm (its lines are ahead), so the job is held, never printed twice or marked
+        done (docs/server.md "Full disks")."""
+        try:
+            self.spool.save_checkpoint(job_id, checkpoint, strokes_total)
+            self._checkpoint_warned = False
+        except Exception as exc:  # noqa: BLE001 - only a full disk is let through
+            if not disk_full(exc):
+                raise
+            if not getattr(self, "_checkpoint_warned", False):
+                log.warning("printer %s: job %s: checkpoint not recorded, the state directory's "
+                            "disk is full (%s); printing on", self.name_, job_id, exc)
+                self._checkpoint_warned = True
 
     @staticmethod
     def _damaged_copy(job: dict, members: list[dict]) -> str:
@@ -632,8 +698,9 @@ class Worker(threading.Thread):
         if job.get("hot_path"):
             crashpoints.reached("hot_done")
         keep = self.srv.keeps_copy(state)
-        self.spool.finish(job["id"], state, message, keep_copy=keep, row=row,
-                          copy_done=copy_done, members=words)
+        self._durable(lambda: self.spool.finish(job["id"], state, message, keep_copy=keep,
+                                                row=row, copy_done=copy_done, members=words),
+                      f"job {job['id']}'s end")
         crashpoints.reached("finish")
         self._cancel.discard(job["id"])
         if not keep:
