@@ -1,6 +1,10 @@
 # Two commands do all set-up on a fresh machine (README):
 #   make demo   - print the bundled sample on the emulator, write the media and a job report
 #   make test   - install the test dependencies and run the whole suite
+# and for working on it:
+#   make test-fast   - the suite without the tests marked slow, system or gui (the inner loop)
+#   make wheel-check - build the wheel, install it into a fresh venv outside the checkout and
+#                      print, rip, compare and run the acceptance suite from it (CI runs it)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -16,9 +20,10 @@ IPP_SRC := app/ipp/wideprint-ipp.c
 AVAHI  := build/avahi/.unpacked
 AOT    := build/aot.stamp
 
-.PHONY: demo test install bench clean bytecode kernels
+.PHONY: demo test test-fast wheel-check install bench clean bytecode kernels
 
-$(STAMP): setup.cfg pyproject.toml constraints.txt
+# __init__.py holds the version: an editable install's metadata is written at install
+$(STAMP): setup.cfg pyproject.toml constraints.txt __init__.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test,gui]'
@@ -64,6 +69,16 @@ demo: $(STAMP) bytecode
 
 test: $(STAMP) $(IPP_BIN) $(AVAHI) bytecode
 	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+# the markers (setup.cfg [tool:pytest], assigned in tests/conftest.py): slow (measured),
+# system (a real cupsd, avahi, network namespaces), gui (Qt)
+FAST := not slow and not system and not gui
+test-fast: $(STAMP) $(IPP_BIN) bytecode
+	$(BIN)/python -m pytest -q -p no:cacheprovider -m "$(FAST)"
+
+# the package as a packager installs it (.ci/wheel-check): not the checkout's .venv
+wheel-check: $(IPP_BIN)
+	PYTHON=$(PYTHON) bash .ci/wheel-check
 
 bench: $(STAMP) $(AOT) bytecode
 	$(BIN)/python bench/run.py
