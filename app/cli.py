@@ -404,6 +404,13 @@ def cmd_print(args) -> int:
             else:
                 progress(1, 1, f"{label} done", final=True)
                 rep["media"] = media_file if args.media_out else None
+                media_error = (dev.emulator.jobs_done.get(job_id, {}).get("media_error")
+                               if dev.emulator is not None else None)
+                if media_error:             # printed, but the media file asked for is missing
+                    failed += 1
+                    rep["media"], rep["media_error"] = None, media_error
+                    print(f"{shown(f, NAME_LIMIT)}: media not written: {shown(media_error)}",
+                          file=sys.stderr)
                 if args.scan_out:
                     rep["scan"] = scans[job_id]
                 if args.spectro_out:

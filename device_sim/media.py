@@ -114,8 +114,9 @@ class Media:
     kernel releases the GIL), one after the other in the order the emulator asked for them,
     while the emulator goes on decoding blocks and feeding paper: the line's state never
     depends on where drops land, only what is read back does.  Reading the window or the
-    counts (`drops`, `stray`, `late`, `snapshot`, `close`) waits for the work in flight;
-    a failure in it (a full disk) surfaces at the next call."""
+    counts (`drops`, `stray`, `late`, `snapshot`, `close`) waits for the work in flight.
+    A file that cannot be written (a full disk) stops the writing, not the landing: close()
+    raises it once and removes the unfinished file."""
 
     def __init__(self, width: int, height: int, dpi_x: float, dpi_y: float, window_rows: int,
                  path: str | None = None):
@@ -134,6 +135,7 @@ class Media:
         self._queued: list = []              # (channel or None, future), oldest first
         self._books = threading.Lock()       # _queued and the counts: a live view reads too
         self.closed = False
+        self.error: BaseException | None = None   # the file could not be written (close raises it)
 
     def _queue(self, channel, fn, *args) -> None:
         self._collect(wait=False)
@@ -205,11 +207,16 @@ class Media:
         """The window's first n rows to the file (the worker thread)."""
         win = self._win
         n_win = min(n, win.shape[0])
-        if self._writer:
-            self._writer.write(win[:n_win])       # taken at once (rip/planes.py)
-            blank = np.zeros((min(n - n_win, win.shape[0]), self.width, 4), np.uint8)
-            for r in range(n_win, n, blank.shape[0] or 1):      # rows past the window: empty
-                self._writer.write(blank[:min(blank.shape[0], n - r)])
+        if self._writer and self.error is None:
+            try:
+                self._writer.write(win[:n_win])       # taken at once (rip/planes.py)
+                blank = np.zeros((min(n - n_win, win.shape[0]), self.width, 4), np.uint8)
+                for r in range(n_win, n, blank.shape[0] or 1):  # rows past the window: empty
+                    self._writer.write(blank[:min(blank.shape[0], n - r)])
+            except (OSError, ValueError, RuntimeError) as exc:
+                # the file cannot be written (a full disk): the drops still land and are
+                # counted, the rows are dropped, and close() says so once
+                self.error = exc
         # shift the window up in place (one memmove, no copy of the job's width x a swath;
         # the writer keeps no view of it)
         keep = win.shape[0] - n_win
@@ -220,13 +227,27 @@ class Media:
         win[keep:] = 0
 
     def close(self) -> None:
+        """The rest of the rows written and the file completed.  A failure (a full disk)
+        is raised once, the unfinished file removed, and the media is closed all the same:
+        the printer takes its next job (docs/emulator.md "Media")."""
         if self.closed:
             return
+        self.closed = True
         try:
             self.flush_below(self.height)
             self._collect()
-        finally:
-            self._worker.shutdown()
+        except BaseException:
+            self._worker.shutdown(cancel_futures=True)
+            if self._writer:
+                self._writer.abort()
+            raise
+        self._worker.shutdown()
         if self._writer:
-            self._writer.close()
-        self.closed = True
+            if self.error is not None:
+                self._writer.abort()
+                raise self.error
+            try:
+                self._writer.close()
+            except BaseException:
+                self._writer.abort()
+                raise

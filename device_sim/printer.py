@@ -154,8 +154,7 @@ class Printer:
         return self.line is not None and not self.line.done
 
     def close(self) -> None:
-        if self.media:
-            self.media.close()
+        self._close_media()
         self._close_scan()
         if self.vcd is not None and self.vcd_path:
             self.vcd.write(self.vcd_path)
@@ -537,8 +536,7 @@ class Printer:
                 x0, width, height, dpi, row_nm, y0) == tuple(self.job[k] for k in (
                 "x0", "width", "height", "dpi", "row_nm", "y0")):
             return                      # the host reconnected and said it again
-        if self.media:
-            self.media.close()
+        self._close_media()
         # a new job starts with no stroke of its own: an earlier job's last stroke (same
         # number, same fire count) must not look like this job's (docs/protocol.md JOB_BEGIN)
         self.line_done = False
@@ -570,13 +568,28 @@ class Printer:
                 slack_um=self._y_slack_nm / 1000, swath_um=self.profile.swath_rows * row_nm / 1000)
         self.log("job_begin", **self.job)
 
+    def _close_media(self) -> str:
+        """The open media file completed; '' or why it could not be written (a full disk):
+        the emulator records the failure (event `media_error`, the job's `media_error`) and
+        goes on — the printer itself is not wedged by its recorder's disk."""
+        media = self.media
+        if media is None:
+            return ""
+        try:
+            media.close()
+            return ""
+        except (OSError, RuntimeError, ValueError) as exc:
+            self.log("media_error", path=media.path, error=str(exc))
+            return f"{media.path}: {exc}"
+
     def job_end(self, job: int) -> None:
         self.before_job_end()
         if self.media:
-            self.media.close()
+            error = self._close_media()
             cpi = self.profile.counts_per_inch
             stats = dict(drops=[int(d) for d in self.media.drops], stray=self.media.stray,
-                         late=self.media.late, path=self.media.path,
+                         late=self.media.late, path=None if error else self.media.path,
+                         media_error=error or None,
                          # where the image area sat: its left edge from the measured paper
                          # edge, and image row 0's paper position after JOB_BEGIN
                          left_mm=round((self.job["x0"] - self.paper_edges[0]) / cpi * 25.4, 3),
@@ -597,7 +610,7 @@ class Printer:
         so what the printer did can be inspected (app/api.py)."""
         self._close_scan()
         if self.media:
-            self.media.close()
+            self._close_media()
             self.log("job_abandoned", job=self.job["job"] if self.job else None,
                      drops=[int(d) for d in self.media.drops])
         if self.job is not None:

@@ -8,6 +8,7 @@ with a file and freed again."""
 import errno
 import os
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -106,3 +107,41 @@ def test_a_job_printing_when_the_disk_fills_ends_done_when_space_returns(small_d
     assert [r["outcome"] for r in report] == ["done"]
     assert "Traceback" not in err, err[-3000:]
 
+
+
+def test_a_full_media_disk_does_not_wedge_the_emulated_printer(small_disk, tmp_path):
+    """The emulator's media folder full: that job's media is not written (said so, no half
+    file), the printer takes the next job, and once there is space again its media is
+    bit-exact; the server stops at once."""
+    media = small_disk                     # here the tmpfs holds the media, not the state
+    planes = [random_planes(300, 400, seed=s) for s in (46, 47)]
+    srcs = [write_cmyk_tiff(tmp_path / f"m{i}.tif", p) for i, p in enumerate(planes)]
+    srv, client = start_server(tmp_path / "srv", "emulator", media)
+    try:
+        filler = fill(media)
+        first = client.submit(srcs[0])["job"]["id"]
+        j1 = client.wait(first, timeout=60)
+        assert not (media / f"job-{first}.tif").exists()      # no half-written file
+        filler.unlink()
+        second = client.submit(srcs[1])["job"]["id"]
+        j2 = client.wait(second, timeout=60)
+        t0 = time.monotonic()
+    finally:
+        err = stop(srv)
+    assert time.monotonic() - t0 < 10                         # SIGTERM: stopped promptly
+    assert j2["state"] == "done", (j1, j2)
+    assert np.array_equal(read_planes(media / f"job-{second}.tif"), planes[1])
+    assert "Traceback" not in err, err[-3000:]
+
+
+def test_print_says_when_its_media_file_could_not_be_written(small_disk, tmp_path):
+    src = write_cmyk_tiff(tmp_path / "p.tif", random_planes(300, 400, seed=48))
+    filler = fill(small_disk)
+    out = small_disk / "media.tif"
+    r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", str(src),
+                        "--device", "emulator", "--media-out", str(out), "--size", "pixels"],
+                       capture_output=True, text=True, timeout=120)
+    filler.unlink()
+    assert r.returncode != 0, r
+    assert "media not written" in r.stderr and str(out) in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()
