@@ -5,9 +5,13 @@ Every request gets an answer or a closed connection within the connection timeou
 every malformed one a 4xx with one log line: the request head must arrive within
 `api_timeout_s` (a connection silent that long is closed), framing headers are parsed
 strictly (one Content-Length, digits only), ids and numbers are digits within SQLite's
-64-bit range, and at most `api_max_connections` connections are served at once — the
-next ones get 503 at once from one small thread.  A client that goes away is one log line,
-never a traceback.
+64-bit range.  One listener thread reads request heads without a thread each (slow and
+half-open clients cost a socket, not a thread); at most `api_max_connections` requests are
+served at once, a quarter of the threads kept for plain GETs — the next ones get 503 at
+once.  A client that goes away is one log line, never a traceback.
+
+Who may do what (the operator's token, users' tokens, job owners) is `auth.py`
+(docs/server.md "Users and roles"); a full disk is 507 (`storage_full`).
 """
 
 from __future__ import annotations

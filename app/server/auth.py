@@ -24,6 +24,7 @@ import hmac
 import logging
 import os
 import re
+import sqlite3
 import threading
 import time
 from dataclasses import dataclass
@@ -188,20 +189,26 @@ class Owners:
             c.execute("INSERT OR REPLACE INTO job_owners (job_id, owner) VALUES (?, ?)",
                       (job_id, owner))
 
+    def _read(self, sql: str, args: tuple) -> list:
+        """A read that never writes: no table yet (no owner recorded) is no rows."""
+        try:
+            return self.spool.db.execute(sql, args).fetchall()
+        except sqlite3.OperationalError as exc:
+            if "no such table" in str(exc):
+                return []
+            raise
+
     def get(self, job_id: int) -> str | None:
-        self._table()
-        row = self.spool.db.execute("SELECT owner FROM job_owners WHERE job_id=?",
-                                    (job_id,)).fetchone()
-        return row[0] if row else None
+        rows = self._read("SELECT owner FROM job_owners WHERE job_id=?", (job_id,))
+        return rows[0][0] if rows else None
 
     def of(self, jobs: list[dict]) -> dict[int, str]:
         """The owners of these jobs (those that have one)."""
         if not jobs:
             return {}
-        self._table()
         ids = [j["id"] for j in jobs]
-        rows = self.spool.db.execute("SELECT job_id, owner FROM job_owners WHERE job_id "
-                                     "BETWEEN ? AND ?", (min(ids), max(ids))).fetchall()
+        rows = self._read("SELECT job_id, owner FROM job_owners WHERE job_id BETWEEN ? AND ?",
+                          (min(ids), max(ids)))
         wanted = set(ids)
         return {r[0]: r[1] for r in rows if r[0] in wanted}
 
