@@ -112,7 +112,8 @@ class Client:
         from .server.config import default_state_dir
         self.state_dir = Path(state_dir) if state_dir else default_state_dir()
         if url is None:
-            url = read_server_file(self.state_dir)
+            # a user whose account cannot read the state directory (0700) is told the URL
+            url = os.environ.get("WIDEPRINT_URL") or read_server_file(self.state_dir)
         if token is None:
             token = find_token(self.state_dir)
         u = urlsplit(url)

@@ -297,3 +297,23 @@ def test_the_ipp_bridge_passes_the_requesting_user(srv, tif, monkeypatch):
     job = Client(srv.state_dir).job(int(sent[0].split("\t")[2]))
     assert job["owner"] == "frank"
     Client(srv.state_dir).action(job["id"], "cancel")
+
+
+def test_a_user_account_without_the_state_directory_uses_its_own_token(srv, people, tif,
+                                                                       tmp_path, monkeypatch):
+    cfg = tmp_path / "cfg"
+    (cfg / "wideprint").mkdir(parents=True)
+    (cfg / "wideprint" / "token").write_text(people["alice"].token + "\n")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(cfg))
+    monkeypatch.setenv("WIDEPRINT_URL", srv.url)
+    monkeypatch.delenv("WIDEPRINT_TOKEN_FILE", raising=False)
+    c = Client(tmp_path / "no-state-here", user="someone")
+    try:
+        job = c.submit(tif, hold=True)["job"]
+        assert job["owner"] == "alice"
+        with pytest.raises(ApiError) as e:
+            c.pause_queue(True)
+        assert e.value.status == 403
+        assert c.action(job["id"], "cancel")["state"] == "cancelled"
+    finally:
+        c.close()
