@@ -44,6 +44,18 @@ def _import_the_package_now() -> None:
 
 _import_the_package_now()
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """The markers `slow`, `system` and `gui` (`make test-fast` runs the suite without them),
+    from the tables in tests/support/marks.py: the test files carry none themselves.  First,
+    so that `-m` sees them."""
+    from support.marks import markers_for
+    for item in items:
+        function = getattr(item, "originalname", None) or item.name.split("[")[0]
+        for name in markers_for(item.path.name, function, getattr(item, "fixturenames", ())):
+            item.add_marker(getattr(pytest.mark, name))
+
+
 # 1 image pixel = 1 device dot: the placement for tests that compare the media with the
 # planes they wrote (a physical-size placement resamples them)
 PX = Placement(size="pixels")
