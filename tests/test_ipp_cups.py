@@ -16,6 +16,7 @@ import pytest
 
 from conftest import ROOT, random_planes, write_cmyk_tiff
 from private_cups import IppServe, assert_bit_exact, private_cupsd, sha256, wait_job
+from support.cups import conversions_from
 from wideprint.app.ipp.bridge import find_binary
 
 PLOTTERS = ("plotter1", "plotter2")           # one per host PC, each its own server
@@ -106,11 +107,27 @@ def _pdf(path):
     return path
 
 
+def test_conversions_from_reads_convs_files_as_cupsd_does(tmp_path):
+    (tmp_path / "filter").mkdir()
+    (tmp_path / "filter" / "imagetopdf").write_text("")
+    (tmp_path / "mime.convs").write_text("# image/tiff application/pdf 33 imagetopdf\n"
+                                         "image/jpeg application/pdf 33 imagetopdf\n")
+    assert conversions_from("image/tiff", [tmp_path], tmp_path / "filter") == []
+    (tmp_path / "cupsfilters.convs").write_text(
+        "image/tiff\tapplication/vnd.cups-pdf\t65\timagetopdf\n"
+        "image/*   application/vnd.cups-raster 100 imagetoraster  # not installed\n")
+    assert conversions_from("image/tiff", [tmp_path], tmp_path / "filter") == [
+        "cupsfilters.convs: image/tiff application/vnd.cups-pdf 65 imagetopdf"]
+
+
 def test_a_driverless_queue_passes_jpeg_through_and_tiff_only_raw(plain_cups, shop, tmp_path):
     """What `-m everywhere` makes of the printer (docs/ipp.md, "CUPS queues"): CUPS'
     generated PPD passes JPEG and PNG through unchanged; it has no TIFF entry (IPP Everywhere
-    knows no TIFF), so without wideprint.convs a TIFF is refused unless sent raw.  Both
-    print bit-exact from the client's original file."""
+    knows no TIFF), so without wideprint.convs a TIFF is not passed through: where CUPS has
+    no filter for TIFF (cups-daemon alone) it is refused, where it has one (cups-filters, on
+    any desktop Debian) CUPS converts it and wideprint gets CUPS' conversion, not the
+    client's file.  Sent raw it is passed through.  JPEG and the raw TIFF print bit-exact
+    from the client's original file."""
     ppd = _ppd(plain_cups, "plotter1")
     assert '*cupsFilter2: "image/jpeg image/jpeg 0 -"' in ppd
     assert '*cupsFilter2: "image/png image/png 0 -"' in ppd
@@ -119,9 +136,15 @@ def test_a_driverless_queue_passes_jpeg_through_and_tiff_only_raw(plain_cups, sh
     jpeg = _jpeg(tmp_path / "poster.jpg", seed=41)
     tif = write_cmyk_tiff(tmp_path / "plan.tif", random_planes(120, 90, seed=42))
     lp(plain_cups, "plotter1", jpeg, "-n", "2")
-    r = subprocess.run(["lp", "-h", plain_cups.host, "-d", "plotter1", str(tif)],
+    converted = write_cmyk_tiff(tmp_path / "converted.tif", random_planes(60, 50, seed=44))
+    r = subprocess.run(["lp", "-h", plain_cups.host, "-d", "plotter1", str(converted)],
                        capture_output=True, text=True, timeout=30, env=plain_cups.env)
-    assert r.returncode != 0 and 'Unsupported document-format "image/tiff"' in r.stderr
+    filters = conversions_from("image/tiff")
+    if filters:
+        assert r.returncode == 0, f"CUPS has {filters}, yet refused the TIFF: {r.stderr}"
+    else:
+        assert r.returncode != 0 and 'Unsupported document-format "image/tiff"' in r.stderr, \
+            r.stdout + r.stderr
     lp(plain_cups, "plotter1", tif, "-o", "raw")
     job = wait_job(serve.client, "poster.jpg", timeout=60)
     # the JPEG went through CUPS unchanged (sha256), with CUPS' print-quality normal
@@ -131,6 +154,15 @@ def test_a_driverless_queue_passes_jpeg_through_and_tiff_only_raw(plain_cups, sh
     job = wait_job(serve.client, "plan.tif", timeout=60)
     assert job["preset"] == "default"
     assert_bit_exact(serve, job, tif, "plotter1")
+    if filters:
+        # CUPS planned a conversion of the TIFF and, a queue's jobs going out in order, had
+        # dealt with it before the raw one: the plotter did not get the client's file.  (A
+        # desktop's cupsd sends a PDF; this private one's filters, run as `lp`, cannot reach
+        # its spool in the test's 0700 temporary folder, so there the conversion fails.)
+        log = (plain_cups.dir / "log" / "error_log").read_text(errors="replace")
+        assert "(image/tiff to " in log, "CUPS planned no conversion of the TIFF" + plain_cups.log()
+        sums = {j["sha256"] for j in serve.client.jobs("done,failed,cancelled,queued,held,printing")}
+        assert sha256(converted) not in sums, "a TIFF went through a driverless queue unconverted"
 
 
 def test_with_wideprint_convs_tiff_and_pdf_pass_through_unchanged(cups, shop, tmp_path):
