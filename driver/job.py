@@ -378,6 +378,7 @@ class PrintJob:
             # left are the top ones going forward and the bottom ones going back
             start = first + done if stroke.direction == 0 else first
             speed, accel = self.line_speed(), prof.accel_counts_s2()
+            streamer.discard_stale()                # earlier lines' reports (protocol 3.2)
             link.call(P.Op.SET_LINE, stroke=stroke.index, direction=stroke.direction, dpi=dpi,
                       fire_start=start, fire_count=fires, speed=speed, accel=accel)
             link.write_reg(P.REG_DIR, 1 if stroke.direction == 0 else 0)

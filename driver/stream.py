@@ -76,10 +76,18 @@ class StrokeStreamer:
         except (ConnectionError, OSError) as exc:
             raise StreamError(f"stroke {self.stroke}: data link lost ({exc})") from exc
 
+    def discard_stale(self) -> None:
+        """Before SET_LINE of a new line: drop what waits on the data channel — reports of
+        an earlier line, perhaps with the same stroke id (every job and copy starts at 0),
+        which would count as this line's (docs/protocol.md 3.2)."""
+        while self._recv(0.0):
+            pass
+        self.decoder = P.ReportDecoder()
+
     def _reports(self, timeout: float) -> None:
         for rep in self.decoder.feed(self._recv(timeout)):
-            if rep.stroke != self.stroke:
-                continue
+            if rep.stroke != self.stroke or rep.blocks > self.sent:
+                continue                 # another line's (more blocks than we sent: 3.2)
             self.acked = max(self.acked, rep.blocks)
             level = min(rep.fifo)
             self.min_fifo_words = level if self.min_fifo_words is None else min(self.min_fifo_words, level)

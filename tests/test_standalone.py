@@ -52,3 +52,25 @@ def test_print_through_standalone_emulator(tmp_path, serial, data):
     media = list(tmp_path.glob("media-*.tif"))          # {job}: this run's printer job id
     assert len(media) == 1, media
     assert np.array_equal(read_planes(media[0]), planes)
+
+
+def test_one_stroke_jobs_in_a_row_take_no_earlier_lines_reports(tmp_path):
+    """Each file a single stroke 0, one after another on one data link: the reports of
+    the first line, left unread once its blocks were all sent, must not count as the next
+    line's (docs/protocol.md 3.2; before, the second job overran the ring: fault 05)."""
+    proc, spec = start_emulator(tmp_path)
+    try:
+        planes = [random_planes(113, 231, seed=s) for s in (3, 4, 5)]
+        srcs = [str(write_cmyk_tiff(tmp_path / f"in{i}.tif", p)) for i, p in enumerate(planes)]
+        r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "print", *srcs,
+                            "--device", spec, "--passes", "1", "--bidir", "--size", "pixels"],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+    finally:
+        proc.terminate()
+        out, err = proc.communicate(timeout=10)
+    assert "Traceback" not in err, err
+    media = sorted(tmp_path.glob("media-*.tif"), key=lambda f: int(f.stem.split("-")[1]))
+    assert len(media) == 3, media                    # the run's job ids, in order
+    for m, p in zip(media, planes):
+        assert np.array_equal(read_planes(m), p)
