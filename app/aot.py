@@ -71,6 +71,18 @@ def exercise() -> None:
         grey = images[0]
         api.predict_scan(grey, Path(d) / "scan.tif", size="pixels")
         api.predict_scan(grey, Path(d) / "scan-grey.tif", size="pixels", grey=True)
+        # the spectrophotometer's kernels (device_sim/spectro.py): a print measured
+        from ..driver.job import PrintJob
+        from ..rip.profile import load_profile
+        from .devices import close_device, open_device
+        prof = load_profile()
+        dev = open_device("emulator", prof, media_path=str(media),
+                          spectro_path=str(Path(d) / "lab.tif"), spectro_dpi=50)
+        try:
+            PrintJob(dev, RipJob(str(images[1]), RipSettings(placement=Placement(size="pixels")),
+                                 prof)).run()
+        finally:
+            close_device(dev)
     # paths no small generated file reaches cheaply: called as their callers call them
     for mode in (0, 1, 2, 3):
         rtl._decode_row(mode, np.frombuffer(b"\x00\x00", np.uint8), np.zeros(8, np.uint8))
