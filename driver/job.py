@@ -197,9 +197,18 @@ class PrintJob:
         return self._command(lambda: self.printer.wait(done, what, timeout))
 
     def prepare(self) -> P.Status:
-        """The printer brought to readiness (driver/printer.py `ready`)."""
-        return self._command(lambda: self.printer.ready(
+        """The printer brought to readiness (driver/printer.py `ready`).  A job starting
+        afresh finds no line of an earlier run still going: a line left running or starved
+        by a host that went away is stopped (its job, if resumed later, is refused by the
+        printer's account: docs/protocol.md 2.10)."""
+        st = self._command(lambda: self.printer.ready(
             on_step=lambda words: self._state("connecting", words)))
+        if self.resume is None and st.motion == P.Motion.PRINTING:
+            log.warning("job %s: the printer is still in a line of an earlier run (stroke %d); "
+                        "stopping it", self.job_id, st.stroke)
+            self._command(self.printer.stop)
+            st = self._wait(lambda s: s.motion == P.Motion.IDLE, "the earlier line to stop")
+        return st
 
     def place(self) -> int:
         """x0: encoder count of image column 0 on the measured paper, from the placement's

@@ -260,6 +260,12 @@ class Printer:
         st = self.status()
         if st.fault != P.Fault.NONE:
             raise PrinterFault(f"printer reports a fault: {fault_message(st, self.profile)}", st.fault)
+        if st.motion not in (P.Motion.IDLE, P.Motion.PRINTING):
+            # a motion an earlier host started (a park, a feed, a spit) before it went away:
+            # every command that moves would be refused BUSY until it ends
+            say("waiting for the printer's motion to end")
+            st = self.wait(lambda s: s.motion in (P.Motion.IDLE, P.Motion.PRINTING),
+                           "the printer's motion to end")
         if not st.flags & P.FLAG_HEADS_CONFIGURED:
             say("loading head configuration")
             self.configure_heads(force=True)

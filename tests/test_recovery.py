@@ -85,3 +85,33 @@ def test_a_job_resumes_from_its_checkpoint_on_the_same_printer(tmp_path, profile
     assert len(lines) == len(set(lines))                       # no stroke printed twice
     assert started[0] == 4 and started == sorted(started)     # from stroke 4 on, no earlier one
     assert rep.strokes_printed == rep.strokes_total
+
+
+def test_a_fresh_job_stops_a_line_an_earlier_host_left_running(tmp_path, profile):
+    """A host that went away mid-line (a killed server) leaves the line starved, PRINTING;
+    the next job, starting afresh, stops it instead of failing on BUSY (before: 'printer
+    refused GET_PAPER: BUSY'; found by bench/crash_soak.py as 'refused SPIT: BUSY')."""
+    from wideprint.driver import protocol as P
+    from wideprint.driver.printer import Printer
+    from wideprint.rip.settings import Placement
+    planes = random_planes(100, 120, seed=1)
+    src = write_cmyk_tiff(tmp_path / "a.tif", planes)
+    dev = open_device("emulator", profile, Faults(starve_guard=1), media_path=str(tmp_path / "m.tif"))
+    try:
+        Printer(dev).ready()
+        link = dev.link
+        link.call(P.Op.JOB_BEGIN, job=77, x0=7680, width=2000, height=100, dpi=300,
+                  row_nm=profile.row_nm, y0=0)
+        link.call(P.Op.SET_LINE, stroke=0, direction=0, dpi=300, fire_start=3840,
+                  fire_count=2000, speed=15590, accel=47244)
+        link.write_reg(P.REG_DIR, 1)
+        link.write_reg(P.REG_DPI, P.DPI_CODE[300])
+        link.write_reg(P.REG_WE_EN, 1)
+        link.command(P.Op.START_LINE)            # no data follows: the line starves
+        assert link.status().motion == P.Motion.PRINTING
+        rep = PrintJob(dev, RipJob(str(src), RipSettings(placement=Placement(size="pixels")),
+                                   profile)).run()
+    finally:
+        dev.emulator.close()
+    assert rep.state == "done"
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
