@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 from .compiled import kernel
-from .halftone import _end_row, _rows4, _serpentine
+from .serpentine import _end_row, _rows4, _serpentine
 
 __all__ = ["OSTROMOUKHOV", "ZHOU_FANG_KEYS", "ZHOU_FANG_STRENGTH", "TUNED_STRENGTH", "UNIT",
            "WEIGHT_BITS", "MODULATION", "NEXT_BOOST", "VCDiffuser", "coefficient_table",
@@ -648,7 +648,7 @@ if __name__ == "__main__":  # pragma: no cover - an offline tool
     import sys
     if sys.argv[1:] != ["--tune"]:
         sys.exit("usage: python -m wideprint.rip.diffusion --tune")
-    from .halftone import modulation_noise
+    from .masks import modulation_noise
     table = tune_strength(modulation_noise())
     print("TUNED_STRENGTH = (" + ", ".join(f"{x:g}" for x in table) + ")")
     print("as shipped:", bool(np.array_equal(table, np.asarray(TUNED_STRENGTH))))

@@ -108,14 +108,17 @@ child.  Bands below 64 k pixel-planes run in the calling thread.  See
 from __future__ import annotations
 
 import functools
-import os
-from pathlib import Path
 
 import numpy as np
 
 from .compiled import kernel
-
+# the masks (read once, checked) and the serpentine scan shared with rip/diffusion.py live
+# in modules of their own; re-exported here, where they always were
+from .masks import (BLUENOISE_PATH, MASKS, MODULATION_PATH, SCREEN_PATH,  # noqa: F401
+                    load_bluenoise_mask, load_modulation_mask, load_screen_mask,
+                    modulation_noise)
 from .parallel import WORKERS, run_parallel
+from .serpentine import _end_row, _rows4, _serpentine  # noqa: F401
 
 __all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "load_modulation_mask",
            "load_screen_mask", "mask_offsets", "screen_layout", "threshold_tile"]
@@ -123,10 +126,6 @@ __all__ = ["METHODS", "Halftoner", "bayer_matrix", "load_bluenoise_mask", "load_
 from .settings import METHODS, ORDERED  # noqa: E402 - declared with the settings schema
 ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
-MASKS = Path(__file__).resolve().parent.parent / "resources" / "masks"
-BLUENOISE_PATH = MASKS / "bluenoise128.npy"       # the pass masks' tile (rip/swath.py)
-SCREEN_PATH = MASKS / "screen256.npy"             # the bluenoise screen
-MODULATION_PATH = MASKS / "bluenoise256.npy"      # vced's and vector's threshold modulation
 #: error diffusion with variable coefficients (rip/diffusion.py): independent channels, and
 #: colour-aware pairs (C with M, Y with K)
 VARIABLE = ("vced", "vector")
@@ -160,35 +159,6 @@ def _fs_step(lvl, a):
     v -= dot * 4080
     e = v >> 4
     return dot, e * 7 + (v - (e << 4)), e
-
-
-@kernel(inline="always")
-def _serpentine(k, width, fwd):
-    """Pixel k of a serpentine row (left to right when `fwd`, else right to left) -> (x, p,
-    q), unsigned: its column, its cell in the error rows (x + _PAD) and the row-below cell
-    behind it, where the down-behind share goes.  The one-loop kernels here and in
-    rip/diffusion.py scan through it (unsigned indices spare numba's wrap-around checks)."""
-    if fwd:
-        x = np.uint64(k)
-        return x, x + np.uint64(2), x + np.uint64(1)
-    x = np.uint64(width - 1 - k)
-    return x, x + np.uint64(2), x + np.uint64(3)
-
-
-@kernel(inline="always")
-def _rows4(err, r):
-    """The four inks' error rows (err (4, 2, width + 4)) for image row r: this row's and the
-    next one's, ink after ink: (c0, n0, c1, n1, c2, n2, c3, n3)."""
-    a, b = r & 1, (r + 1) & 1
-    return err[0, a], err[0, b], err[1, a], err[1, b], err[2, a], err[2, b], err[3, a], err[3, b]
-
-
-@kernel(inline="always")
-def _end_row(cur, nxt, pending, width, fwd):
-    """A serpentine row's end, one ink: the row-below cell under its last pixel takes what
-    is pending for it, and the row's own error cells are cleared for the row two on."""
-    nxt[width + 1 if fwd else 2] = pending
-    cur[:] = 0
 
 
 @kernel()
@@ -431,47 +401,6 @@ def bayer_matrix(n: int = 16) -> np.ndarray:
     while m.shape[0] < n:
         m = np.block([[4 * m, 4 * m + 2], [4 * m + 3, 4 * m + 1]])
     return m.astype(np.uint16)
-
-
-@functools.lru_cache(maxsize=None)
-def _bluenoise_cached(path: str) -> np.ndarray:
-    mask = np.load(path, allow_pickle=False)
-    if mask.ndim != 2 or mask.shape[0] != mask.shape[1]:
-        raise ValueError(f"{path}: blue-noise mask must be square, got shape {mask.shape}")
-    flat = mask.reshape(-1).astype(np.int64)
-    if flat.min() < 0 or flat.max() >= flat.size or np.bincount(flat, minlength=flat.size).max() != 1:
-        raise ValueError(f"{path}: blue-noise mask is not a permutation of 0..{flat.size - 1}")
-    mask = mask.astype(np.uint16 if flat.size <= 1 << 16 else np.uint32)
-    mask.setflags(write=False)
-    return mask
-
-
-def load_bluenoise_mask(path: str | os.PathLike | None = None) -> np.ndarray:
-    """The shipped 128x128 blue-noise rank mask (read-only, cached): the pass masks' tile."""
-    return _bluenoise_cached(str(BLUENOISE_PATH if path is None else path))
-
-
-def load_screen_mask(path: str | os.PathLike | None = None) -> np.ndarray:
-    """The shipped 256x256 screen rank mask (read-only, cached): the ``bluenoise`` screen
-    (resources/masks/README.md)."""
-    return _bluenoise_cached(str(SCREEN_PATH if path is None else path))
-
-
-def load_modulation_mask() -> np.ndarray:
-    """The shipped 256x256 rank mask of ``vced`` / ``vector``'s threshold modulation
-    (read-only, cached; the screen mask before the coarse-scale one, kept because the
-    modulation strength is tuned on it)."""
-    return _bluenoise_cached(str(MODULATION_PATH))
-
-
-@functools.lru_cache(maxsize=None)
-def modulation_noise() -> np.ndarray:
-    """The modulation mask as uint8 noise 0..255 (each value on n*n/256 pixels): the threshold
-    modulation of the variable-coefficient error diffusion."""
-    ranks = load_modulation_mask().astype(np.int64)
-    noise = (ranks * 256 // ranks.size).astype(np.uint8)
-    noise.setflags(write=False)
-    return noise
 
 
 def mask_offsets(size: int, channels: int, seed: int = 0) -> np.ndarray:
