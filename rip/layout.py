@@ -21,7 +21,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .pipeline import PrintableJob
+from .printable import PrintableJob
 from .place import _reband
 from .settings import MM_PER_INCH, SETTINGS, RipSettings, _round
 
@@ -591,10 +591,15 @@ class _Run:
 
 class LayoutJob(PrintableJob):
     """Several placed items on one sheet, composed in bands (docs/layout.md).  The
-    PrintableJob of a layout: `RipJob` makes one when the settings ask for a layout."""
+    PrintableJob of a layout: `RipJob` makes one when the settings ask for a layout, and is
+    its `make_job`, the factory of each item's job."""
 
     def __init__(self, paths, settings: RipSettings, profile, paper_mm: float | None = None,
-                 when: datetime | None = None, names=()):
+                 when: datetime | None = None, names=(), *,
+                 make_job: Callable[..., PrintableJob]):
+        # make_job(path, settings, profile): the job of one item - `RipJob`, handed in by
+        # RipJob itself, so that this module does not import rip/pipeline.py (no circle)
+        self.make_job = make_job
         self.paths = [os.fspath(p) for p in paths]
         self.path = self.paths[0]
         self.settings, self.profile = settings, profile
@@ -621,8 +626,7 @@ class LayoutJob(PrintableJob):
         free = self._free.get(item.key)
         if free:
             return free.pop()
-        from .pipeline import RipJob
-        job = RipJob(item.path, item_settings(self.settings, item.turn), self.profile)
+        job = self.make_job(item.path, item_settings(self.settings, item.turn), self.profile)
         job.compensate_dead = False          # the sheet's rows are compensated, not the item's
         self._open.append(job)
         if item.crop is not None:

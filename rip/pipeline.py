@@ -8,7 +8,6 @@ image length.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -19,11 +18,11 @@ from .inputs import open_source, prescreened_packed
 from .load import ImageSource, open_image  # noqa: F401 - re-exported
 from .parallel import ordered
 from .place import place  # noqa: F401 - re-exported
-from .planes import PlanesWriter
+from .printable import PrintableJob  # the base (rip/printable.py); re-exported here
 from .profile import COLORS, Profile, load_profile
 from .screen import OrderedScreen
 from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the settings schema's objects
-from .swath import StrokeData, StrokePlanner, pack_dots, unpack_dots
+from .swath import StrokePlanner, pack_dots, unpack_dots
 
 
 BAND_PIXELS = 1 << 19     # pixels per band, at most (RipJob.band_rows)
@@ -106,63 +105,6 @@ def profile_curves(profile: Profile, dpi: int | None = None) -> np.ndarray | Non
     return None if np.array_equal(lut, np.broadcast_to(x, (4, 256))) else lut
 
 
-class PrintableJob:
-    """What the driver prints: an image area of width x height device dots, its halftone
-    bands, and the strokes planned from them.  Subclasses give `halftone_bands()` (dots,
-    (h, W, 4) 0/1) and may give `packed_bands()` (the same as bits, (h, 4, W/8)) when they
-    can make those more cheaply; the planner works on bits."""
-    path: str
-    settings: RipSettings
-    profile: Profile
-    width: int
-    height: int
-
-    @property
-    def dpi_y(self) -> float:
-        return 25.4e3 / self.profile.row_um
-
-    def halftone_bands(self) -> Iterator[np.ndarray]:
-        raise NotImplementedError
-
-    def packed_bands(self) -> Iterator[np.ndarray]:
-        for band in self.halftone_bands():
-            yield pack_dots(band)
-
-    def planner(self) -> StrokePlanner:
-        s = self.settings
-        return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                             s.pass_mask)
-
-    def strokes(self, planner: StrokePlanner | None = None) -> Iterator[StrokeData]:
-        planner = planner or self.planner()
-        for bits in self.packed_bands():
-            yield from planner.feed_packed(bits)
-        yield from planner.finish()
-
-    def packed_native(self) -> bool:
-        """Whether `packed_bands()` is the cheaper way to this job's halftone (it is made as
-        bits, not dots)."""
-        return False
-
-    def write_planes(self, out: str | Path, planes_format: str = "8bit") -> np.ndarray:
-        """The halftone the RIP intends, as a planes TIFF (docs/formats.md; `planes_format`
-        "8bit" or "packed"); returns dots per colour.  Deflating runs on worker threads
-        while this thread makes the next bands."""
-        with PlanesWriter(out, self.width, self.height, self.settings.dpi, self.dpi_y,
-                          description=f"wideprint planes of {Path(self.path).name}",
-                          planes_format=planes_format) as w:
-            if self.packed_native():
-                for bits in self.packed_bands():
-                    w.write_bits(bits)
-            else:
-                for band in self.halftone_bands():
-                    w.write(band)
-        return w.dots
-
-    def close(self) -> None:
-        pass
-
-
 @dataclass
 class RipJob(PrintableJob):
     """One file ripped for one printer: the image placed on the device grid (columns at the
@@ -181,7 +123,7 @@ class RipJob(PrintableJob):
         if wants_layout(self.settings.placement, self.more):
             # one layout is one job: its items placed on one sheet, composed in bands
             self.layout = LayoutJob([self.path, *self.more], self.settings, self.profile,
-                                    paper_mm=self.paper_mm, names=self.names)
+                                    paper_mm=self.paper_mm, names=self.names, make_job=RipJob)
             self.source = None
             self.width, self.height = self.layout.width, self.layout.height
             return
