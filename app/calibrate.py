@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .calibrate_cli import KINDS
 from ..rip.profile import FINE_STEPS, Profile, ProfileError, load_profile, save_calibration
+from ..rip.testpatterns import CALIBRATION_KINDS as KINDS
 
 if TYPE_CHECKING:      # the patterns import the RIP's kernels: not for `wideprint --help`
     from ..rip.testprints import Mark, ScanLayout

@@ -4,9 +4,9 @@ every other command - does not load numpy and the scan analysis."""
 
 from __future__ import annotations
 
-# the scans `calibrate KIND` measures: the test print each is a scan of
-KINDS = {"nozzles": "nozzle-check", "bidir": "bidir-scan", "heads": "heads-scan",
-         "feed": "feed-scan", "wedge": "wedge-scan"}
+# the scans `calibrate KIND` measures: the test print each is a scan of (the registry of
+# test patterns, rip/testpatterns.py; this name kept for its users)
+from ..rip.testpatterns import CALIBRATION_KINDS as KINDS
 
 
 def cmd_calibrate(args) -> int:
