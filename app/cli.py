@@ -379,8 +379,10 @@ def cmd_print(args) -> int:
 
             def on_event(kind, label=label, job_id=job_id, file=f, **kw):
                 if kind == "stroke":                    # a progress bar on a terminal
+                    # the count before the file name: a terminal cuts the line's end
+                    # (a 45-character name on 100 columns showed "stroke 4 of 1" for 14)
                     progress(kw["index"], kw["total"],
-                             f"{label} stroke {kw['index'] + 1} of {kw['total']}")
+                             f"stroke {kw['index'] + 1} of {kw['total']}  {label}")
                 if log_json is not None:                # structured log: one JSON object a line
                     import dataclasses
                     data = {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v)

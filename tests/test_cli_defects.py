@@ -1,0 +1,51 @@
+"""`wideprint print` as a user sees it (issue 32, item 7): the progress line's stroke count,
+an empty folder, and faults injected into every emulated device."""
+
+import io
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import tifffile
+
+from wideprint.app.cli import EXIT_OK, EXIT_USAGE, main
+
+PY = sys.executable
+
+
+def cli(*args, timeout=300):
+    return subprocess.run([PY, "-m", "wideprint.app.cli", *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+class _Terminal(io.StringIO):
+    """stderr as a 100-column terminal (app/server_cli.progress draws only on a tty; with no
+    file number to ask, it takes 100 columns)."""
+
+    def isatty(self):
+        return True
+
+    def fileno(self):
+        raise OSError("no file number")
+
+
+def test_the_progress_line_shows_the_whole_stroke_count(tmp_path, monkeypatch):
+    """"stroke 4 of 1" was "stroke 4 of 14" cut at the terminal's width: the count came after
+    a file name of up to 60 characters.  Every drawn line now holds the whole count."""
+    name = "poster-for-the-spring-exhibition-final-v3.tif"              # 45 characters
+    img = np.tile(np.linspace(0, 255, 300, dtype=np.uint8)[None, :, None], (400, 1, 3))
+    tifffile.imwrite(tmp_path / name, img, photometric="rgb", resolution=(300, 300))
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    assert main(["print", "--passes", "4", str(tmp_path / name)]) == EXIT_OK
+    lines = [ln for ln in term.getvalue().replace("\n", "\r").split("\r") if "stroke" in ln]
+    assert lines
+    totals = set()
+    for ln in lines:
+        m = re.search(r"stroke (\d+) of (\d+)\b", ln)
+        assert m, ln
+        totals.add(int(m.group(2)))
+        assert int(m.group(1)) <= int(m.group(2)), ln
+    assert len(totals) == 1 and totals.pop() > 9, lines         # the same, whole, total
