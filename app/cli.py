@@ -217,11 +217,19 @@ def _expand(files: list[str]) -> tuple[list[str], dict[str, str]]:
             out.append(f)
             continue
         try:
-            out += sorted(str(c) for c in p.iterdir() if not c.name.startswith(".") and c.is_file())
+            listed = sorted(str(c) for c in p.iterdir() if not c.name.startswith(".") and c.is_file())
         except OSError as exc:
             out.append(f)
             problems[f] = f"{f}: cannot list the folder: {exc.strerror or exc}"
+            continue
+        if not listed:                   # a job of its own, failed: never "0 of 0 printed"
+            out.append(f)
+            problems[f] = f"{f}: {NO_FILES}"
+        out += listed
     return out, problems
+
+
+NO_FILES = "no files to print in the folder"
 
 
 def _nest_files(files: list[str], unlisted: dict, settings, profile) -> tuple[list, list]:
@@ -271,6 +279,8 @@ def cmd_print(args) -> int:
                        for f in files)
         return finish(code)
 
+    if files and all(unlisted.get(f, "").endswith(NO_FILES) for f in files):
+        return refuse(EXIT_USAGE, "; ".join(unlisted[f] for f in files))
     emulator = is_emulator_spec(args.device)
     try:
         profile = _profile(args)

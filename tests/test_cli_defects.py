@@ -49,3 +49,32 @@ def test_the_progress_line_shows_the_whole_stroke_count(tmp_path, monkeypatch):
         totals.add(int(m.group(2)))
         assert int(m.group(1)) <= int(m.group(2)), ln
     assert len(totals) == 1 and totals.pop() > 9, lines         # the same, whole, total
+
+
+@pytest.mark.parametrize("content", ["nothing", "hidden", "subfolder"])
+def test_a_folder_with_nothing_to_print_is_an_error_naming_it(tmp_path, content):
+    """`print EMPTY_DIR/` said "0 of 0 printed" and exited 0."""
+    d = tmp_path / "incoming"
+    d.mkdir()
+    if content == "hidden":
+        (d / ".DS_Store").write_bytes(b"x")
+    elif content == "subfolder":
+        (d / "old").mkdir()
+    r = cli("print", "--device", "emulator", d)
+    assert r.returncode == EXIT_USAGE, (r.returncode, r.stdout, r.stderr)
+    assert str(d) in r.stderr and "no files" in r.stderr, r.stderr
+    assert "0 of 0 printed" not in r.stdout
+
+
+def test_an_empty_folder_beside_a_file_prints_the_file_and_fails(tmp_path):
+    """The file is printed; the folder with nothing in it is a failed entry, named."""
+    img = np.full((20, 30, 3), 128, np.uint8)
+    tifffile.imwrite(tmp_path / "a.tif", img, photometric="rgb", resolution=(300, 300))
+    (tmp_path / "empty").mkdir()
+    report = tmp_path / "r.json"
+    r = cli("print", "--report", report, tmp_path / "a.tif", tmp_path / "empty")
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert "1 of 2 printed" in r.stdout and str(tmp_path / "empty") in r.stderr
+    import json
+    states = {e["file"]: e["state"] for e in json.loads(report.read_text())}
+    assert states == {str(tmp_path / "a.tif"): "done", str(tmp_path / "empty"): "failed"}
