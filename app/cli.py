@@ -297,8 +297,9 @@ def cmd_print(args) -> int:
                               spectro_out=args.spectro_out)
     except (ValueError, OSError) as exc:
         return refuse(EXIT_USAGE, str(exc))
-    if args.inject and args.device != "emulator":
-        return refuse(EXIT_USAGE, "--inject needs --device emulator")
+    if args.inject and not emulator:
+        return refuse(EXIT_USAGE, f"--inject needs an emulated device (--device emulator, "
+                      f"emulator-usb or emulator-pci), not {args.device}")
     only_emulator = [o for o, v in (("--media-out", args.media_out), ("--preview", args.preview),
                                     ("--event-log", args.event_log), ("--vcd", args.vcd),
                                     ("--latched-out", args.latched_out),

@@ -147,7 +147,8 @@ def cmd_printer(args) -> int:
         faults = None
         if args.inject:
             if not is_emulator_spec(args.device):
-                raise ValueError("--inject needs --device emulator")
+                raise ValueError(f"--inject needs an emulated device (--device emulator, "
+                                 f"emulator-usb or emulator-pci), not {args.device}")
             from ..device_sim.faults import Faults
             faults = Faults.parse(args.inject)
     except ValueError as exc:

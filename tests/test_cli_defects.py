@@ -78,3 +78,26 @@ def test_an_empty_folder_beside_a_file_prints_the_file_and_fails(tmp_path):
     import json
     states = {e["file"]: e["state"] for e in json.loads(report.read_text())}
     assert states == {str(tmp_path / "a.tif"): "done", str(tmp_path / "empty"): "failed"}
+
+
+@pytest.mark.parametrize("device", ["emulator-pci", "emulator-usb"])
+def test_inject_is_taken_by_every_emulated_device(tmp_path, device):
+    """docs/pci.md: the card's faults are injected with --inject; every emulated device
+    (app/devices.is_emulator_spec) takes them, not only `--device emulator`."""
+    img = np.full((40, 60, 3), 100, np.uint8)
+    tifffile.imwrite(tmp_path / "a.tif", img, photometric="rgb", resolution=(300, 300))
+    fault = "pci-dma-abort=1" if device == "emulator-pci" else "data-stall=0.001"
+    r = cli("print", "--device", device, "--inject", fault, "--log-json", tmp_path / "log.jsonl",
+            tmp_path / "a.tif")
+    assert "--inject needs" not in r.stderr, r.stderr
+    assert r.returncode == EXIT_OK, (r.stdout, r.stderr)
+    if device == "emulator-pci":            # the abort happened on the card, and was recovered
+        assert "DMA aborted" in (tmp_path / "log.jsonl").read_text()
+
+
+def test_inject_with_a_real_device_is_still_refused(tmp_path):
+    img = np.full((20, 30, 3), 100, np.uint8)
+    tifffile.imwrite(tmp_path / "a.tif", img, photometric="rgb", resolution=(300, 300))
+    r = cli("print", "--device", "serial=socket://127.0.0.1:9,data=tcp://127.0.0.1:9",
+            "--inject", "pci-dma-abort=1", tmp_path / "a.tif")
+    assert r.returncode == EXIT_USAGE and "emulated" in r.stderr, r.stderr
