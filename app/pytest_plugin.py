@@ -118,7 +118,7 @@ def wideprint_server(tmp_path, wideprint_profile):
     free loopback port) and a client of it: `server.client.submit(path)`,
     `server.client.wait(job_id)`, `server.media(job_id)`."""
     from .server import PrintServer, ServerConfig
-    from .server_cli import Client
+    from .client import Client
     media = tmp_path / "server-media"
     srv = PrintServer(ServerConfig(state_dir=tmp_path / "server-state", media_dir=media, port=0,
                                    profile_path=wideprint_profile.path))

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from PySide6.QtCore import QObject, QRunnable, QThreadPool, Signal
 
-from ..server_cli import ApiError, Client
+from ..client import ApiError, Client
 
 log = logging.getLogger("wideprint.gui")
 

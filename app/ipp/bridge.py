@@ -1,7 +1,7 @@
 """The bridge between the IPP Everywhere Printer Application (app/ipp/wideprint-ipp.c, built
 on PAPPL) and the print server (docs/ipp.md).
 
-`IppBridge` is an ordinary client of the server's HTTP API (`app.server_cli.Client`, the
+`IppBridge` is an ordinary client of the server's HTTP API (`app.client.Client`, the
 token of the state directory): it writes the Printer Application's configuration from the
 server's printers and their printer profiles, starts the program, and then speaks the line
 protocol of docs/ipp.md ("The bridge protocol") on its stdin/stdout:
@@ -160,7 +160,7 @@ class IppBridge:
         self._dpi: dict[str, tuple] = {}
 
     def _client(self, user: str | None = None):
-        from ..server_cli import Client
+        from ..client import Client
         return Client(self.state_dir, url=self.url, token=self.token, timeout=30, user=user)
 
     # -- start and stop -------------------------------------------------------------------------
@@ -285,7 +285,7 @@ class IppBridge:
 
     def _submit(self, f: list[str]) -> None:
         tag, printer, fmt, path, copies, quality, xdpi, orientation, intent, user, name = f
-        from ..server_cli import ApiError
+        from ..client import ApiError
         # the job belongs to the IPP requesting-user-name (docs/server.md "Users and roles")
         client = self._client(user=requesting_user(user))
         try:
@@ -308,7 +308,7 @@ class IppBridge:
         self._send(job_line(int(tag), job))
 
     def _cancel(self, tag: int) -> None:
-        from ..server_cli import ApiError
+        from ..client import ApiError
         with self._tracks_lock:
             job_id = self._tracks.get(tag)
         if job_id is None:
@@ -323,7 +323,7 @@ class IppBridge:
 
     def _poll_loop(self) -> None:
         """The server's printer and job states to the program, when they change."""
-        from ..server_cli import ApiError
+        from ..client import ApiError
         client = self._client()
         sent_printers: dict[str, str] = {}
         sent_jobs: dict[int, str] = {}
