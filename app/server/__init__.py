@@ -12,6 +12,7 @@ the CLI, the GUI, CUPS and hot folders are its clients.  One module per concern:
     fsck        the state directory checked at start and by `serve --check`; a lost queue rebuilt
     crashpoints named points of a job's life where the crash tests kill the server
     core        PrintServer (ties the above together) and serve()
+    ports       what api, worker and hotfolders see of PrintServer (they never import core)
 """
 
 import importlib

@@ -33,18 +33,15 @@ import threading
 import time
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler
-from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlsplit
 
 from ..safe_text import REDACTED, add_secret, install_log_filter, safe
 from .auth import OPERATOR, USER, Identity, Owners, Users, claimed_name, may_act
 from .config import DEFAULT_API_TIMEOUT_S, MIN_TOKEN, SQLITE_MAX_INT
+from .ports import ApiHost  # what it sees of the server (core.py composes it)
 from .previews import PREVIEW_PX, THUMB_PX
 from .spool import STATES, SpoolError
 from .validate import Invalid, _check_int, validate_job_request
-
-if TYPE_CHECKING:
-    from .core import PrintServer
 
 log = logging.getLogger("wideprint.server")
 # every log line of the server's loggers: names shown escaped, tokens taken out (safe_text)
@@ -179,7 +176,7 @@ class ApiHandler(BaseHTTPRequestHandler):
     server_version = "wideprint"
     protocol_version = "HTTP/1.1"
     default_request_version = "HTTP/1.0"             # errors always carry a status line
-    srv: "PrintServer"                               # set on the subclass
+    srv: ApiHost                                     # set on the subclass (core.py)
 
     # -- connection and request head ------------------------------------------------------------
     def setup(self) -> None:

@@ -13,6 +13,10 @@ One process owns the printer (one Device, re-opened after link errors) and its q
 The presets (`Presets`) are re-read when their file changes, without a restart; a broken
 file keeps the presets in use.
 
+`PrintServer` is the composition root: it builds every part and hands each a reference to
+itself, which the part sees through a protocol of ports.py (`WorkerHost`, `HotFolderHost`,
+`ApiHost`); no part imports this module.
+
 Nothing here trusts its inputs: names, JSON, sizes and file types are checked (see
 `validate_*`, `HotFolders`), and a file that cannot be ripped fails its own job only.
 """

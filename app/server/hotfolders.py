@@ -20,13 +20,10 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from .config import IGNORED_SUFFIXES, unique_names
+from .ports import HotFolderHost  # what it sees of the server (core.py composes it)
 from .validate import Invalid, validate_name
-
-if TYPE_CHECKING:
-    from .core import PrintServer
 
 log = logging.getLogger("wideprint.server")
 
@@ -167,7 +164,7 @@ class HotFolders(threading.Thread):
 
     Nothing below the root is reached by a path: see the module's doc."""
 
-    def __init__(self, server: "PrintServer", root: Path):
+    def __init__(self, server: HotFolderHost, root: Path):
         super().__init__(name="wideprint-hot-folders", daemon=True)
         self.srv = server
         self.root = Path(os.path.abspath(root))

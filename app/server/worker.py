@@ -11,14 +11,11 @@ import logging
 import os
 import threading
 import time
-from typing import TYPE_CHECKING
 
 from . import crashpoints, fsck
+from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .spool import COLORS, disk_full
 from .validate import rip_settings, with_icc_paths
-
-if TYPE_CHECKING:
-    from .core import PrintServer
 
 log = logging.getLogger("wideprint.server")
 
@@ -37,7 +34,7 @@ class DiskFull(Exception):
 class Worker(threading.Thread):
     """One printer: prints its queued jobs one at a time, in queue order."""
 
-    def __init__(self, server: "PrintServer", printer=None, profile=None):
+    def __init__(self, server: WorkerHost, printer=None, profile=None):
         from .config import PrinterConfig
         self.printer = printer or PrinterConfig("main", server.config.device,
                                                 server.config.profile_path)
