@@ -274,7 +274,7 @@ class Scanner:
     def _reflectance(self, r0: int, r1: int) -> None:
         """Render sheet rows [r0, r1) from the accumulator: dots, coverage, ink limit, the
         media's spectra through the sensor."""
-        from .spectro import coverage_rows
+        from .coverage import coverage_rows
         h = self.rk + self.rv
         refl = np.empty((r1 - r0, self.width, 3), np.float32)
         for c0 in range(r0, r1, STRIP):                 # in strips: small temporaries
