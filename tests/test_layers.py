@@ -3,6 +3,7 @@ the host (`driver/`) and the emulated printer (`device_sim/`).  Every import sta
 every module, relative or absolute, top level or inside a function, parsed with `ast`."""
 
 import ast
+import functools
 import sys
 from pathlib import Path
 
@@ -33,15 +34,36 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def imports(name: str) -> set[str]:
-    """The modules `name` imports: wideprint.x.y for the package's own (`from pkg import m`
-    counts as pkg.m when m is a module), the top-level name for anything else."""
+def _type_checking_only(tree: ast.AST) -> set[int]:
+    """ids of the import nodes under `if TYPE_CHECKING:` (or `typing.TYPE_CHECKING`): read by
+    the type checker only, never run."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and (
+                (isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING")
+                or (isinstance(node.test, ast.Attribute) and node.test.attr == "TYPE_CHECKING")):
+            out.update(id(n) for stmt in node.body for n in ast.walk(stmt))
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def import_lines(name: str, type_checking: bool = True) -> dict[str, int]:
+    """The modules `name` imports, each with the line of its first import statement:
+    wideprint.x.y for the package's own (`from pkg import m` counts as pkg.m when m is a
+    module), the top-level name for anything else.  Every import statement counts - at
+    module level or inside a function, relative or absolute - except, with
+    type_checking=False, those under `if TYPE_CHECKING:`."""
     path = MODULES[name]
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    tree = ast.parse(path.read_text(), str(path))
+    skip = set() if type_checking else _type_checking_only(tree)
+    found: dict[str, int] = {}
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
         if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
+            for alias in node.names:
+                found.setdefault(alias.name, node.lineno)
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".")
@@ -51,8 +73,17 @@ def imports(name: str) -> set[str]:
                 mod = node.module
             for alias in node.names:
                 sub = f"{mod}.{alias.name}"
-                found.add(sub if sub in MODULES else mod)
-    return {m if m.startswith(PKG + ".") or m == PKG else m.split(".")[0] for m in found}
+                found.setdefault(sub if sub in MODULES else mod, node.lineno)
+    out: dict[str, int] = {}
+    for m, line in found.items():
+        key = m if m.startswith(PKG + ".") or m == PKG else m.split(".")[0]
+        out[key] = min(line, out.get(key, line))
+    return out
+
+
+def imports(name: str) -> set[str]:
+    """The modules `name` imports (`import_lines`, every statement counted)."""
+    return set(import_lines(name))
 
 
 def own(name: str) -> set[str]:
@@ -139,9 +170,13 @@ def test_no_payload_struct_format_outside_the_protocol_module():
     assert offenders == []
 
 
-def _cycles() -> list[set[str]]:
+def _graph(type_checking: bool = True) -> dict[str, set[str]]:
+    return {m: {x for x in import_lines(m, type_checking) if x in MODULES} for m in MODULES}
+
+
+def _cycles(graph: dict[str, set[str]] | None = None) -> list[set[str]]:
     """Strongly connected components of more than one module (Tarjan)."""
-    graph = {m: {x for x in imports(m) if x in MODULES} for m in MODULES}
+    graph = _graph() if graph is None else graph
     index, low, stack, on, out = {}, {}, [], set(), []
 
     def visit(v):
@@ -187,3 +222,77 @@ def test_the_gui_is_a_client_and_opens_no_device():
            for m in in_folder("app.gui")}
     assert {m: b for m, b in bad.items() if b} == {}
     assert in_folder("app.gui")                      # the check saw the GUI's modules
+
+
+# -- no circles inside a package ------------------------------------------------------------
+# A circle of imports - a imports b, b imports a, however many modules lie between - means
+# neither module can be read, tested or moved without the other, and one of them imports
+# half-made at run time.  The graph is every import statement of every module of the tree,
+# at module level and inside functions alike (a function-level import is a dependency
+# deferred, not removed); only imports under `if TYPE_CHECKING:` are left out, since they
+# are read by the type checker and never run (prefer a protocol, as app/server/ports.py does).
+# The edges are the imports written: `from .a.b import x` counts as an edge to a.b, not to
+# the package a whose __init__ Python also runs.
+
+PACKAGES = sorted({m.rpartition(".")[0] for m in MODULES if m.count(".") >= 2}
+                  | {m for m in MODULES if MODULES[m].name == "__init__.py"})
+
+
+def _a_cycle(component: set[str], graph: dict[str, set[str]]) -> list[str]:
+    """One shortest circle through the component's first module: [a, b, ..., a]."""
+    start = min(component)
+    paths = {start: [start]}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for v in frontier:
+            for w in sorted(graph[v] & component):
+                if w == start:
+                    return paths[v] + [start]
+                if w not in paths:
+                    paths[w] = paths[v] + [w]
+                    nxt.append(w)
+        frontier = nxt
+    raise AssertionError(f"{component} is not strongly connected")
+
+
+def _describe(cycle: list[str]) -> str:
+    """`a.py:12 -> b.py:40 -> a.py`: each module with the line that imports the next."""
+    steps = []
+    for a, b in zip(cycle, cycle[1:]):
+        line = import_lines(a, type_checking=False)[b]
+        steps.append(f"{MODULES[a].relative_to(ROOT)}:{line}")
+    return " -> ".join(steps + [str(MODULES[cycle[-1]].relative_to(ROOT))])
+
+
+def test_the_cycle_finder_names_a_circle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set()}
+    (component,) = _cycles(graph)
+    assert component == {"a", "b", "c"}
+    assert _a_cycle(component, graph) == ["a", "b", "c", "a"]
+
+
+def test_type_checking_imports_are_told_apart():
+    tree = ast.parse("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import os\n"
+                     "import sys\n")
+    skipped = _type_checking_only(tree)
+    names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) and id(n) not in skipped
+             for a in n.names]
+    assert names == ["sys"]
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_circle_inside_a_package(package):
+    """No module of `package` (its own modules, not its subpackages') is in an import
+    circle with another: docs/architecture.md, "No circles"."""
+    graph = _graph(type_checking=False)
+    mine = {m for m in MODULES if m.rpartition(".")[0] == package or m == package}
+    found = [_describe(_a_cycle(c, graph)) for c in _cycles(graph) if c & mine]
+    assert found == [], "import circles:\n  " + "\n  ".join(found)
+
+
+def test_no_import_circle_anywhere():
+    """Across packages too (the layers above forbid most such circles already)."""
+    graph = _graph(type_checking=False)
+    found = [_describe(_a_cycle(c, graph)) for c in _cycles(graph)]
+    assert found == [], "import circles:\n  " + "\n  ".join(found)
