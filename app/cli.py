@@ -18,6 +18,9 @@ def _rip_options(p: argparse.ArgumentParser) -> None:
     from ..rip.settings import add_arguments
     p.add_argument("--profile", metavar="TOML",
                    help="printer profile (default: resources/printers/default.toml)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="the RIP's worker threads (default: $WIDEPRINT_THREADS, else one a core "
+                   "this process may use); the result is the same whatever the count")
     add_arguments(p)
 
 
@@ -859,6 +862,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.command not in _QUICK_START:
         _collector_on()
+    if getattr(args, "threads", None) is not None:      # before the RIP makes its pools
+        import os
+        os.environ["WIDEPRINT_THREADS"] = str(args.threads)    # and for child processes
+        from ..rip.parallel import set_workers
+        try:
+            set_workers(args.threads)
+        except ValueError as exc:
+            ap.error(str(exc))
     _give_back_big_buffers()
     import logging                  # here: `--help` and usage errors never need it
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,

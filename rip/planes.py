@@ -32,6 +32,7 @@ import tifffile
 
 from .compiled import kernel
 from .dotdeflate import deflate_dot_tile
+from .parallel import WORKERS
 
 TILE = (64, 1024)          # the 8-bit encoding's tiles
 STRIP_ROWS = 64            # the packed encoding's strips
@@ -169,7 +170,7 @@ class PlanesWriter:
         self._pending: list[np.ndarray] = []
         self._pending_rows = 0
         self._rows = 0
-        workers = workers or max(1, min(2, os.cpu_count() or 1))
+        workers = workers or WORKERS            # the RIP's count (rip/parallel.py)
         self._deflate = _deflate(quick=not self.packed)
         self._blank: bytes | None = None        # a deflated tile of blank paper
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="planes-deflate")
