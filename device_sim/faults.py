@@ -27,6 +27,8 @@ KINDS = {
     "feed-error": "the paper travels this much further per feed (15um), or by a fraction (0.1%)",
     "misdirect": "HEAD:NOZZLE:8um (along the feed) or HEAD:NOZZLE:x=5um,y=-3um (repeatable)",
     "dot-diameter": "diameter of a dot on the paper in the scan (e.g. 120um)",
+    "dot-gain": "colour drift: every dot spreads this much wider on the paper (e.g. +8%: a "
+                "new ink batch, a warmer platen; docs/media.md)",
     "scan-rotation": "scan: the sheet lies rotated by this many degrees on the glass",
     "scan-scale": "scan: the scanner's true resolution is this factor finer (e.g. 1.002)",
     "scan-offset": "scan: X,Y in mm: the sheet lies this far right/down on the glass",
@@ -105,6 +107,7 @@ class Faults:
     feed_error_fraction: float = 0.0                     # of each feed's travel
     misdirect: list = field(default_factory=list)        # [(head name, nozzle, Length x, Length y)]
     dot_diameter: Length | None = None
+    dot_gain: float = 0.0                                # fraction of the dot's diameter
     scan_rotation: float = 0.0                           # degrees
     scan_scale: float = 1.0
     scan_offset: tuple = (0.0, 0.0)                      # mm
@@ -161,6 +164,11 @@ class Faults:
                     if length.unit not in ("um", "mm") or length.value < 0:
                         raise ValueError(value)
                     setattr(f, attr, length)
+                elif attr == "dot_gain":
+                    v = value.strip()
+                    f.dot_gain = float(v[:-1]) / 100 if v.endswith("%") else float(v)
+                    if not -0.5 < f.dot_gain < 2:
+                        raise ValueError(value)
                 elif attr == "scan_offset":
                     x, y = value.lower().replace("mm", "").split(",")
                     f.scan_offset = (float(x), float(y))

@@ -26,10 +26,11 @@ DOT_SPREAD = 2.4           # dot diameter on the paper / drop diameter in flight
 
 def dot_diameter_um(profile: Profile, faults: Faults | None = None) -> float:
     """The diameter of one dot on the paper: injected, or spread from the drop volume."""
+    gain = 1.0 + (faults.dot_gain if faults is not None else 0.0)    # drift (docs/media.md)
     if faults is not None and faults.dot_diameter is not None:
-        return faults.dot_diameter.um(0.0, 0.0)
+        return faults.dot_diameter.um(0.0, 0.0) * gain
     volume_um3 = profile.drop_volume_pl * 1000.0          # 1 pl = 1000 µm³
-    return DOT_SPREAD * (6.0 * volume_um3 / math.pi) ** (1.0 / 3.0)
+    return DOT_SPREAD * (6.0 * volume_um3 / math.pi) ** (1.0 / 3.0) * gain
 
 
 def _length_um(v, col_um: float, row_um: float) -> float:
