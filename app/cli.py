@@ -170,8 +170,8 @@ def cmd_rip(args) -> int:
     from ..rip.planes import output_file
     _collector_on()
     try:
-        profile = _profile(args)
-        settings = _settings(args, profile)
+        from .media_cli import job_settings
+        profile, settings = job_settings(args, _profile(args))
         _check_icc(settings)
         _check_output_folders(output=args.output)
     except (ValueError, OSError) as exc:
@@ -286,9 +286,9 @@ def cmd_print(args) -> int:
         return refuse(EXIT_USAGE, "; ".join(unlisted[f] for f in files))
     emulator = is_emulator_spec(args.device)
     try:
-        profile = _profile(args)
+        from .media_cli import job_settings
+        profile, settings = job_settings(args, _profile(args))
         faults = Faults.parse(args.inject)
-        settings = _settings(args, profile)
         _check_icc(settings)
         _check_scan(args)
         if args.spectro_out and not SPECTRO_DPI[0] <= args.spectro_dpi <= SPECTRO_DPI[1]:
@@ -671,6 +671,7 @@ def cmd_completion(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from . import devices
     from .. import __version__
+    from .media_cli import add_media_option, add_parser as add_media_parser
     ap = argparse.ArgumentParser(prog="wideprint", description="RIP and driver for the "
                                  "3.4 m CMYK solvent printer (8 x Xaar XJ128), with its emulator.")
     ap.add_argument("--version", action="version", version=f"wideprint {__version__}")
@@ -700,6 +701,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spectro-dpi", type=int, default=50, metavar="N",
                    help="resolution of --spectro-out (default 50: a 0.5 mm aperture; 10..300)")
     _rip_options(p)
+    add_media_option(p)
     p.set_defaults(func=cmd_print)
 
     p = sub.add_parser("rip", help="write the halftone planes the RIP intends")
@@ -710,6 +712,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "packed: one bit per dot and ink, 8x less to compress, read by tifffile, "
                    "libtiff and wideprint but not PIL or libvips (docs/formats.md)")
     _rip_options(p)
+    add_media_option(p)
     p.set_defaults(func=cmd_rip)
 
     p = sub.add_parser("gui", help="the operator GUI (PySide6), a client of this machine's print "
@@ -718,6 +721,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_gui_arguments(p)
     p.set_defaults(func=cmd_gui)
 
+    add_media_parser(sub)         # media list|show|create|verify|recalibrate|remove|export|import
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report

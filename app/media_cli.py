@@ -1,0 +1,254 @@
+"""`wideprint media list|show|create|verify|recalibrate|remove|export|import` and the
+`--media NAME` option of `print` and `rip` (docs/media.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def add_media_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--media", metavar="NAME", help="print with this media (`wideprint media "
+                   "list`): its ICC output profile, ink limits, linearisation and print mode "
+                   "(options given win); default: the shipped media for RGB and grey")
+
+
+def job_settings(args, profile):
+    """(profile, RipSettings) of a job: with --media, the media's ink limit, curves and
+    drop budget in the profile, its print mode under the options given and its ICC as
+    the output profile (unless --output-icc)."""
+    from ..rip.settings import from_mapping, mapping_from_args
+    from .medialib import apply_to_profile, find
+    given = mapping_from_args(args)
+    name = getattr(args, "media", None)
+    if not name:
+        return profile, from_mapping(given, profile)
+    media = find(name)
+    if not media.icc_path.is_file():
+        raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
+    mapping = {**media.settings_defaults(), "output_icc": str(media.icc_path), **given}
+    profile = apply_to_profile(media, profile)
+    return profile, from_mapping(mapping, profile)
+
+
+def _say(args):
+    stream = sys.stderr if getattr(args, "json", False) else sys.stdout
+
+    def progress(msg: str) -> None:
+        print(msg, file=stream, flush=True)
+    return progress
+
+
+def _profile(args):
+    from ..rip.profile import load_profile
+    return load_profile(getattr(args, "profile", None))
+
+
+def cmd_list(args) -> int:
+    from .medialib import DEFAULT_MEDIA, list_media
+    rows = list_media()
+    if args.json:
+        print(json.dumps([{"name": m.name, "version": m.version, "shipped": m.shipped,
+                           "dpi": m.dpi, "ink_limit_percent": m.ink_limit_percent,
+                           "folder": str(m.folder)} for m in rows], indent=2))
+        return EXIT_OK
+    for m in rows:
+        mark = " (default)" if m.name == DEFAULT_MEDIA else ""
+        where = "shipped" if m.shipped else "user"
+        print(f"{m.name:24s} v{m.version:<3d} {m.dpi} dpi {m.passes} pass "
+              f"{m.dither:9s} ink {m.ink_limit_percent:g} %  {where}{mark}")
+    if not rows:
+        print("no media (`wideprint media create NAME`)")
+    return EXIT_OK
+
+
+def cmd_show(args) -> int:
+    from .medialib import find, to_toml
+    m = find(args.name)
+    if args.json:
+        print(json.dumps({**m.values, "folder": str(m.folder), "shipped": m.shipped}, indent=2))
+    else:
+        print(f"# {m.folder}{' (shipped)' if m.shipped else ''}")
+        print(to_toml(m.values), end="")
+    return EXIT_OK
+
+
+def cmd_create(args) -> int:
+    from . import mediacal
+    from .medialib import Media, check_name, check_values, now, save, user_dir
+    name = check_name(args.name)
+    dest = Path(args.dir) / name if args.dir else user_dir() / name
+    if (dest / "media.toml").exists() and not args.replace:
+        raise ValueError(f"media {name!r} exists ({dest}); --replace to make it again")
+    profile = _profile(args)
+    values = check_values({"name": name, "created": now(), "updated": now(),
+                           "description": args.description or "",
+                           "printer": Path(args.profile).stem if args.profile else "default",
+                           "paper": profile.physical.media, "dpi": args.dpi,
+                           "passes": args.passes, "bidir": args.bidir, "dither": args.dither})
+    say = _say(args)
+    say(f"wideprint media create {name}: {args.dpi} dpi, {args.passes} pass, {args.dither}, "
+        f"on the emulator (spectrophotometer)")
+    values = mediacal.create(dest, values, profile, patches=args.patches,
+                             ink_limit=args.ink_limit, linearise=args.linearise,
+                             inject=tuple(args.inject or ()), quality=args.quality,
+                             progress=say)
+    m = save(Media(dest, check_values(values)))
+    if args.json:
+        print(json.dumps({"name": name, "folder": str(dest), **m.values["build"]}, indent=2))
+    else:
+        say(f"media {name} v{m.version} written to {dest}")
+    return EXIT_OK
+
+
+def report_text(r: dict) -> str:
+    tol = r["tolerances"]
+    lines = [f"media {r['media']} v{r['version']}: {r['patches']} in-gamut control patches "
+             f"(seed {r['seed']}), relative colorimetric, ΔE2000",
+             f"  mean {r['mean']:.2f}   (tolerance {tol.get('mean', '-')})",
+             f"  p95  {r['p95']:.2f}   (tolerance {tol.get('p95', '-')})",
+             f"  max  {r['max']:.2f}   (tolerance {tol.get('max', '-')})",
+             f"  {'PASS' if r['pass'] else 'FAIL: ' + ', '.join(r['failed']) + ' over tolerance'}"]
+    if not r["pass"]:
+        lines.append(f"  `wideprint media recalibrate {r['media']}` re-linearises from one "
+                     f"wedge print")
+    return "\n".join(lines)
+
+
+def cmd_verify(args) -> int:
+    from . import mediacal
+    from .medialib import find
+    m = find(args.name)
+    r = mediacal.verify(m, _profile(args), count=args.patches, seed=args.seed,
+                        inject=tuple(args.inject or ()), progress=_say(args))
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print(report_text(r))
+    return EXIT_OK if r["pass"] else EXIT_FAILED
+
+
+def cmd_recalibrate(args) -> int:
+    from . import mediacal
+    from .medialib import Media, check_values, find, now, save, user_dir
+    m = find(args.name)
+    if m.shipped:              # a shipped entry is recalibrated into the user's library
+        import shutil
+        dest = user_dir() / m.name
+        shutil.copytree(m.folder, dest, dirs_exist_ok=True)
+        m = Media(dest, m.values)
+    values = mediacal.recalibrate(m, _profile(args), inject=tuple(args.inject or ()),
+                                  progress=_say(args))
+    values["updated"] = now()
+    m = save(Media(m.folder, check_values(values)))
+    shift = values["build"]["recalibrated"]["max_shift_de"]
+    out = {"media": m.name, "version": m.version, "folder": str(m.folder),
+           "max_shift_de": shift}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"media {m.name} v{m.version}: new linearisation curves (largest response "
+              f"shift found, ΔE: " + ", ".join(f"{k} {v:.1f}" for k, v in shift.items()) + ")")
+    return EXIT_OK
+
+
+def cmd_remove(args) -> int:
+    from .medialib import remove
+    print(f"removed {remove(args.name)}")
+    return EXIT_OK
+
+
+def cmd_export(args) -> int:
+    from .medialib import export
+    print(export(args.name, Path(args.output)))
+    return EXIT_OK
+
+
+def cmd_import(args) -> int:
+    from .medialib import import_
+    m = import_(Path(args.archive), args.name, args.replace)
+    print(f"media {m.name} v{m.version} imported to {m.folder}")
+    return EXIT_OK
+
+
+def cmd_media(args) -> int:
+    from .argyll import ArgyllError
+    t0 = time.monotonic()
+    try:
+        return args.media_func(args)
+    except (ValueError, OSError) as exc:
+        print(f"wideprint media {args.media_command}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except ArgyllError as exc:
+        print(f"wideprint media {args.media_command}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    finally:
+        if args.verbose_time:
+            print(f"{time.monotonic() - t0:.1f} s", file=sys.stderr)
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("media", help="media entries: ICC profile, ink limits, linearisation "
+                       "(docs/media.md)")
+    p.add_argument("--time", dest="verbose_time", action="store_true", help=argparse.SUPPRESS)
+    ms = p.add_subparsers(dest="media_command", required=True)
+
+    def cmd(name, func, help_):
+        q = ms.add_parser(name, help=help_)
+        q.set_defaults(func=cmd_media, media_func=func)
+        return q
+
+    q = cmd("list", cmd_list, "the media in the library")
+    q.add_argument("--json", action="store_true")
+    q = cmd("show", cmd_show, "one entry's fields")
+    q.add_argument("name")
+    q.add_argument("--json", action="store_true")
+
+    q = cmd("create", cmd_create, "make a media on the emulator: wedge, ink limit, "
+            "profiling chart, colprof (minutes)")
+    q.add_argument("name")
+    q.add_argument("--dpi", type=int, default=300, choices=(150, 300, 600))
+    q.add_argument("--passes", type=int, default=1)
+    q.add_argument("--bidir", action="store_true")
+    q.add_argument("--dither", default="vced")
+    q.add_argument("--patches", type=int, default=1000, help="profiling chart (default 1000)")
+    q.add_argument("--ink-limit", type=float, metavar="PERCENT",
+                   help="total ink limit (default: chosen from the ink-limit chart, at most 300)")
+    q.add_argument("--no-linearise", dest="linearise", action="store_false",
+                   help="keep the raw response (identity curves) as the reference")
+    q.add_argument("--quality", default="m", choices=("l", "m", "h"), help="colprof -q")
+    q.add_argument("--description")
+    q.add_argument("--dir", help="write the entry under this folder instead of the library")
+    q.add_argument("--replace", action="store_true")
+    q.add_argument("--profile", metavar="TOML")
+    q.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
+    q.add_argument("--json", action="store_true")
+
+    for name, func, help_ in (("verify", cmd_verify, "print and measure a control chart: "
+                               "ΔE2000 against the entry's tolerances (exit 1: fail)"),
+                              ("recalibrate", cmd_recalibrate, "re-linearise from one wedge "
+                               "print; the profile is kept")):
+        q = cmd(name, func, help_)
+        q.add_argument("name")
+        q.add_argument("--profile", metavar="TOML")
+        q.add_argument("--inject", action="append", metavar="KIND=VALUE",
+                       help="emulator fault, e.g. dot-gain=+8%%")
+        q.add_argument("--json", action="store_true")
+        if name == "verify":
+            q.add_argument("--patches", type=int, default=150)
+            q.add_argument("--seed", type=int, default=7)
+
+    q = cmd("remove", cmd_remove, "delete a user entry")
+    q.add_argument("name")
+    q = cmd("export", cmd_export, "an entry as a .tar.gz")
+    q.add_argument("name")
+    q.add_argument("-o", "--output", required=True, metavar="FILE.tar.gz")
+    q = cmd("import", cmd_import, "an exported entry into the user's library")
+    q.add_argument("archive")
+    q.add_argument("--name")
+    q.add_argument("--replace", action="store_true")

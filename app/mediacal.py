@@ -1,0 +1,375 @@
+"""The closed colour loop on a printer (docs/media.md): charts printed and measured,
+linearisation, the ink limit, the profile (ArgyllCMS), verification and recalibration.
+
+Every chart is a CMYK (or, for verify, RGB) image of square patches that the RIP prints
+like any job (its halftone, its curves) at one device pixel per dot; the emulator's
+spectrophotometer (device_sim/spectro.py) measures it and `measure_patches` averages each
+patch.  ArgyllCMS programs run as processes on CGATS files (app/argyll.py).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import argyll
+from .medialib import IDENTITY, INKS, Media, apply_to_profile
+
+PATCH_MM = 6.0                 # a patch's side: 4 mm measured inside a 1 mm inset
+INSET_MM = 1.0
+ACROSS = 40                    # patches per chart row (240 mm)
+WEDGE_STEPS = tuple(range(0, 101, 5))            # percent, per ink
+TAC_STEPS = tuple(range(160, 401, 20))           # percent, the ink-limit chart
+SOLVENT_VINYL_MAX_TAC = 300.0                    # the most solvent vinyl takes (percent)
+SPECTRO_DPI = 50
+
+Progress = Callable[[str], None]
+
+
+def _quiet(_msg: str) -> None:
+    pass
+
+
+@dataclass
+class Printer:
+    """Where charts print: the in-process emulator with its spectrophotometer (a real
+    printer would print each chart and wait for its measurement file)."""
+    profile: object                     # the printer profile (rip/profile.py)
+    dpi: int = 300
+    passes: int = 1
+    bidir: bool = False
+    dither: str = "vced"
+    inject: tuple[str, ...] = ()        # emulator faults (--inject), e.g. a drift
+    workdir: Path | None = None
+
+    def _settings(self, **more):
+        from ..rip.settings import Placement, RipSettings
+        return RipSettings(dpi=self.dpi, passes=self.passes, bidir=self.bidir,
+                           dither=self.dither, placement=Placement(size="pixels"), **more)
+
+    def patch_pixels(self) -> tuple[int, int]:
+        """Columns and rows of one patch (PATCH_MM at the mode's dpi and the row pitch)."""
+        return (round(PATCH_MM / 25.4 * self.dpi),
+                round(PATCH_MM * 1000 / self.profile.row_um))
+
+    def chart(self, values: np.ndarray, channels: int) -> tuple[np.ndarray, list]:
+        """An image (rows, cols, channels) uint8 of the patches, ACROSS a row, and each
+        patch's rectangle in mm of the image frame."""
+        pw, ph = self.patch_pixels()
+        n = values.shape[0]
+        across = min(ACROSS, n)
+        down = math.ceil(n / across)
+        img = np.zeros((down * ph, across * pw, channels), np.uint8)
+        if channels == 3:
+            img[:] = 255
+        col_mm, row_mm = 25.4 / self.dpi, self.profile.row_um / 1000
+        rects = []
+        for i in range(n):
+            r, c = divmod(i, across)
+            img[r * ph:(r + 1) * ph, c * pw:(c + 1) * pw] = values[i]
+            rects.append((c * pw * col_mm, r * ph * row_mm, (c + 1) * pw * col_mm,
+                          (r + 1) * ph * row_mm))
+        return img, rects
+
+    def measure(self, values: np.ndarray, profile=None, rgb_icc: str | None = None,
+                output_icc: str | None = None, ink_limit: float | None = None,
+                name: str = "chart") -> np.ndarray:
+        """Print these patch values and measure them: Lab (n, 3).  CMYK values (n, 4) in
+        0..255 print as they are (through `profile`'s curves); RGB values (n, 3) are
+        separated through `rgb_icc` -> `output_icc` like any job."""
+        import tifffile
+        from ..device_sim.faults import Faults
+        from ..device_sim.spectro import measure_patches
+        from ..driver.job import PrintJob
+        from ..rip.pipeline import RipJob
+        from .devices import open_device
+        profile = profile or self.profile
+        values = np.asarray(values)
+        img, rects = self.chart(values, values.shape[1])
+        with tempfile.TemporaryDirectory(prefix="wideprint-media-", dir=self.workdir) as tmp:
+            src = Path(tmp) / f"{name}.tif"
+            tifffile.imwrite(src, img, photometric="separated" if img.shape[2] == 4 else "rgb",
+                             resolution=(self.dpi, self.dpi))
+            lab_path = str(Path(tmp) / f"{name}-lab.tif")
+            settings = self._settings(input_icc=rgb_icc, output_icc=output_icc,
+                                      ink_limit=ink_limit)
+            job = RipJob(str(src), settings, profile)
+            dev = open_device("emulator", profile, Faults.parse(list(self.inject)),
+                              spectro_path=lab_path, spectro_dpi=SPECTRO_DPI)
+            try:
+                PrintJob(dev, job).run()
+            finally:
+                dev.emulator.close()
+                job.close()
+            return measure_patches(lab_path, rects, inset_mm=INSET_MM)
+
+
+def pct_to_level(pct) -> np.ndarray:
+    return np.clip(np.round(np.asarray(pct, np.float64) * 2.55), 0, 255).astype(np.uint8)
+
+
+def level_to_pct(level) -> np.ndarray:
+    return np.asarray(level, np.float64) / 2.55
+
+
+# -- linearisation ------------------------------------------------------------------------
+def wedge_values(steps=WEDGE_STEPS) -> np.ndarray:
+    """Each ink alone at every step (C's steps, then M's, ...): (4 x steps, 4) levels."""
+    out = np.zeros((4 * len(steps), 4), np.uint8)
+    for i in range(4):
+        out[i * len(steps):(i + 1) * len(steps), i] = pct_to_level(steps)
+    return out
+
+
+def delta_e_from_paper(lab: np.ndarray, steps=WEDGE_STEPS) -> dict[str, list[float]]:
+    """Each ink's ΔE (CIE76, Euclidean in Lab: additive, as printcal's) from the paper
+    along the wedge; the paper is every ink's 0 % step (their mean)."""
+    k = len(steps)
+    lab = lab.reshape(4, k, 3)
+    paper = lab[:, 0].mean(axis=0)
+    return {ink: [float(v) for v in np.linalg.norm(lab[i] - paper, axis=-1)]
+            for i, ink in enumerate(INKS)}
+
+
+def linear_reference(response: dict[str, list[float]], steps=WEDGE_STEPS) -> dict:
+    """printcal's aim: each ink's ΔE from paper linear in the nominal amount, up to what
+    its solid reaches."""
+    s = np.asarray(steps, np.float64)
+    return {"steps": [float(v) for v in s],
+            **{ink: [float(v) for v in s / s[-1] * max(response[ink])] for ink in INKS}}
+
+
+def curves_for(response: dict[str, list[float]], reference: dict, points: int = 17) -> dict:
+    """Per-ink curves [in, out] (0..255) that make the measured response (ΔE from paper
+    of each raw step) follow the reference: out(x) = response^-1(reference(x))."""
+    s = np.asarray(reference["steps"], np.float64)
+    x = np.linspace(0, 100, points)
+    out = {}
+    for ink in INKS:
+        resp = np.maximum.accumulate(np.asarray(response[ink], np.float64))   # monotone
+        resp = resp + np.arange(resp.size) * 1e-6                             # strictly
+        aim = np.interp(x, s, np.asarray(reference[ink], np.float64))
+        aim = np.minimum(aim, resp[-1])
+        printed = np.interp(aim, resp, s)
+        out[ink] = [[round(float(a) * 2.55, 3), round(float(b) * 2.55, 3)]
+                    for a, b in zip(x, printed)]
+    return out
+
+
+# -- ink limit ----------------------------------------------------------------------------
+def tac_values(steps=TAC_STEPS) -> np.ndarray:
+    """Rich blacks at each total: K solid (from 100 %), C = M = Y share the rest."""
+    rows = []
+    for t in steps:
+        k = min(100.0, t)
+        cmy = min(100.0, (t - k) / 3)
+        rows.append([cmy, cmy, cmy, k])
+    return pct_to_level(np.array(rows))
+
+
+def choose_ink_limit(lab: np.ndarray, steps=TAC_STEPS, most: float = SOLVENT_VINYL_MAX_TAC,
+                     within: float = 0.5) -> float:
+    """The rule: the least total whose L* is within `within` of the darkest the media
+    reaches (more ink beyond it pools and only costs), at most `most`."""
+    L = lab[:, 0]
+    ok = np.nonzero(L <= L.min() + within)[0]
+    return float(min(steps[int(ok[0])], most))
+
+
+# -- the profile --------------------------------------------------------------------------
+def write_ti3(path: Path, levels: np.ndarray, lab: np.ndarray, ink_limit: float | None) -> None:
+    from ..device_sim.spectro import write_ti3 as _write
+    _write(path, level_to_pct(levels), lab, total_ink_limit=ink_limit)
+
+
+def measure_chart(pr: Printer, levels: np.ndarray, profile, path: Path,
+                  ink_limit: float | None = None) -> np.ndarray:
+    """Print and measure a CMYK chart; its measurements also go to `path` (.ti3)."""
+    lab = pr.measure(levels, profile, name=path.stem)
+    write_ti3(path, levels, lab, ink_limit)
+    return lab
+
+
+def bradford_relative(lab: np.ndarray, paper_lab: np.ndarray) -> np.ndarray:
+    """Measurements relative to the media white (ICC relative colorimetric: the paper
+    becomes the D50 white, Bradford adaptation)."""
+    from ..device_sim.spectral import lab_to_xyz, xyz_to_lab
+    m = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367],
+                  [0.0389, -0.0685, 1.0296]])
+    d50 = lab_to_xyz(np.array([100.0, 0, 0]))
+    src = m @ lab_to_xyz(paper_lab)
+    dst = m @ d50
+    adapt = np.linalg.inv(m) @ np.diag(dst / src) @ m
+    return xyz_to_lab(lab_to_xyz(lab) @ adapt.T)
+
+
+def xicclu(icc: Path | str, values: np.ndarray, direction: str = "f") -> np.ndarray:
+    """Argyll's xicclu on many values: forward (device -> Lab) or backward (Lab ->
+    device), relative colorimetric; device values 0..1 in and out."""
+    import subprocess
+    text = "\n".join(" ".join(f"{v:.6f}" for v in row) for row in values) + "\n"
+    cmd = [argyll.tool("xicclu"), "-v0", f"-f{direction}", "-ir", "-pl", str(icc)]
+    done = subprocess.run(cmd, input=text, capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        raise argyll.ArgyllError(f"xicclu failed: {done.stderr.strip()[-200:]}")
+    out = [list(map(float, line.split())) for line in done.stdout.strip().splitlines()
+           if line.strip()]
+    return np.array(out)
+
+
+def _lookup(icc, values: np.ndarray, direction: str, width: int) -> np.ndarray:
+    out = xicclu(icc, values, direction)
+    return out[:, :width]
+
+
+def control_chart(media_icc: Path, count: int = 150, seed: int = 7,
+                  gamut_de: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """An independent control chart: random sRGB colours (this seed) that lie in the
+    media's gamut (Lab -> the profile's B2A -> A2B returns within `gamut_de`): their
+    8-bit RGB (n, 3) and their Lab (sRGB, D50 relative: what relative colorimetric
+    printing aims at)."""
+    from ..device_sim.spectral import delta_e2000
+    srgb = argyll.REF_DIR / "sRGB.icm"
+    if not srgb.is_file():
+        raise argyll.ArgyllError(f"{srgb} is missing. {argyll.INSTALL_HINT}")
+    rng = np.random.default_rng(seed)
+    rgb = rng.integers(0, 256, (count * 4, 3)).astype(np.uint8)
+    lab = _lookup(srgb, rgb / 255.0, "f", 3)
+    dev = _lookup(media_icc, lab, "b", 4)
+    back = _lookup(media_icc, np.clip(dev, 0, 1), "f", 3)
+    keep = np.nonzero(delta_e2000(lab, back) <= gamut_de)[0][:count]
+    return rgb[keep], lab[keep]
+
+
+def stats(de: np.ndarray) -> dict:
+    return {"mean": round(float(de.mean()), 3), "p95": round(float(np.percentile(de, 95)), 3),
+            "max": round(float(de.max()), 3), "patches": int(de.size)}
+
+
+# -- the loop -----------------------------------------------------------------------------
+def printer_for(media_values: dict, profile, inject=(), workdir=None) -> Printer:
+    return Printer(profile, dpi=int(media_values["dpi"]), passes=int(media_values["passes"]),
+                   bidir=bool(media_values["bidir"]), dither=str(media_values["dither"]),
+                   inject=tuple(inject), workdir=workdir)
+
+
+def create(folder: Path, values: dict, profile, patches: int = 1000,
+           ink_limit: float | None = None, linearise: bool = True, inject=(),
+           quality: str = "m", progress: Progress = _quiet) -> dict:
+    """Run the loop and fill `values` (the entry's fields) and `folder` (profile.icc,
+    wedge.ti3, tac.ti3, profiling.ti3).  Returns the values."""
+    t0 = time.monotonic()
+    folder.mkdir(parents=True, exist_ok=True)
+    argyll.tool("targen"), argyll.tool("colprof"), argyll.tool("profcheck")   # fail early
+    pr = printer_for(values, profile, inject)
+    timings = {}
+
+    progress("1/4 linearisation wedge: each ink alone, 0-100 % in 5 % steps")
+    t = time.monotonic()
+    lab = measure_chart(pr, wedge_values(), profile, folder / "wedge.ti3")
+    response = delta_e_from_paper(lab)
+    reference = linear_reference(response) if linearise else {
+        "steps": [float(s) for s in WEDGE_STEPS], **response}
+    values["reference"] = reference
+    values["curves"] = curves_for(response, reference) if linearise else \
+        {ink: IDENTITY for ink in INKS}
+    timings["wedge_s"] = round(time.monotonic() - t, 1)
+    media = Media(folder, dict(values))
+    prof = apply_to_profile(media, profile)
+
+    progress("2/4 ink limit chart: rich blacks 160-400 %")
+    t = time.monotonic()
+    lab = measure_chart(pr, tac_values(), prof, folder / "tac.ti3")
+    chosen = choose_ink_limit(lab)
+    limit = float(ink_limit) if ink_limit is not None else chosen
+    values["ink_limit_percent"] = limit
+    timings["tac_s"] = round(time.monotonic() - t, 1)
+    progress(f"    darkest within 0.5 L* at {chosen:g} %; total ink limit {limit:g} %")
+
+    progress(f"3/4 profiling chart: targen, {patches} patches within {limit:g} %")
+    t = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="wideprint-argyll-") as tmp:
+        stem = Path(tmp) / "profiling"
+        chart = argyll.targen(stem, patches, limit)
+        levels = pct_to_level(chart.cmyk)
+        timings["targen_s"] = round(time.monotonic() - t, 1)
+        t = time.monotonic()
+        progress(f"    printing and measuring {len(levels)} patches")
+        lab = pr.measure(levels, prof, name="profiling")
+        timings["print_measure_s"] = round(time.monotonic() - t, 1)
+        write_ti3(stem.with_suffix(".ti3"), levels, lab, limit)
+        progress("4/4 colprof (ArgyllCMS): the ICC profile")
+        t = time.monotonic()
+        icc = argyll.colprof(stem, limit, quality,
+                             description=f"wideprint {values['name']} {values['dpi']} dpi")
+        timings["colprof_s"] = round(time.monotonic() - t, 1)
+        check = argyll.profcheck(stem.with_suffix(".ti3"), icc)
+        (folder / "profile.icc").write_bytes(icc.read_bytes())
+        (folder / "profiling.ti3").write_bytes(stem.with_suffix(".ti3").read_bytes())
+    values["icc"] = "profile.icc"
+    values["measurements"] = ["wedge.ti3", "tac.ti3", "profiling.ti3"]
+    values["build"] = {"patches": int(len(levels)), "profcheck": check,
+                       "seconds": round(time.monotonic() - t0, 1), **timings,
+                       "injected": list(inject)}
+    progress(f"done in {values['build']['seconds']:.0f} s; profcheck ΔE2000 mean "
+             f"{check['mean']:.2f}, max {check['max']:.2f}")
+    return values
+
+
+def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
+           progress: Progress = _quiet) -> dict:
+    """Print the independent control chart through the media (relative colorimetric,
+    the RIP's own path: sRGB -> the media's profile -> 3-D LUT -> curves), measure it and
+    compare with what it aims at: ΔE2000 mean, p95, max against the tolerances."""
+    from ..device_sim.spectral import delta_e2000
+    progress(f"control chart: {count} in-gamut colours (seed {seed})")
+    rgb, aim = control_chart(media.icc_path, count, seed)
+    values = np.concatenate([np.full((1, 3), 255, np.uint8), rgb])   # patch 0: paper
+    pr = printer_for(media.values, profile, inject)
+    progress(f"printing and measuring {len(values)} patches")
+    lab = pr.measure(values, apply_to_profile(media, profile),
+                     rgb_icc=str(argyll.REF_DIR / "sRGB.icm"), output_icc=str(media.icc_path),
+                     name="verify")
+    rel = bradford_relative(lab[1:], lab[0])
+    de = delta_e2000(aim, rel)
+    result = stats(de)
+    tol = media.values["tolerances"]
+    failed = [k for k in ("mean", "p95", "max") if k in tol and result[k] > tol[k]]
+    return {"media": media.name, "version": media.version, "intent": "relative",
+            **result, "tolerances": tol, "pass": not failed, "failed": failed,
+            "seed": seed, "injected": list(inject), "paper_lab": [round(float(v), 2) for v in lab[0]],
+            "worst": [{"rgb": [int(v) for v in rgb[i]], "aim": [round(float(v), 2) for v in aim[i]],
+                       "measured": [round(float(v), 2) for v in rel[i]], "de2000": round(float(de[i]), 2)}
+                      for i in np.argsort(de)[::-1][:5]]}
+
+
+def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet) -> dict:
+    """One wedge print, new curves that bring each ink's response back to the entry's
+    reference (the profile is kept): returns the new values (version + 1)."""
+    progress("linearisation wedge: each ink alone, 0-100 % in 5 % steps")
+    pr = printer_for(media.values, profile, inject)
+    steps = media.values["reference"]["steps"]
+    version = int(media.values["version"]) + 1
+    name = f"wedge-v{version}.ti3"
+    lab = measure_chart(pr, wedge_values([int(s) for s in steps]), profile, media.folder / name)
+    response = delta_e_from_paper(lab, steps)
+    values = dict(media.values)
+    values["curves"] = curves_for(response, media.values["reference"])
+    values["version"] = version
+    values["measurements"] = [*media.values["measurements"], name]
+    shift = {ink: round(float(np.max(np.abs(np.asarray(response[ink]) -
+                                            np.asarray(media.values['reference'][ink])))), 2)
+             for ink in INKS}
+    values["build"] = {**media.values["build"], "recalibrated": {"inject": list(inject),
+                                                                 "max_shift_de": shift}}
+    return values
+
+
+def media_with(media: Media, **changes) -> Media:
+    return replace(media, values={**media.values, **changes})
