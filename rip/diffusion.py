@@ -319,7 +319,8 @@ def _pair_decide(la, lb, va, vb, ta, tb, t, split):
 
 
 @kernel()
-def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa, oya, oxb, oyb, lim):  # pragma: no cover
+def _vc_pair(src, dst, ca, cb, erra, errb, row0, wn, wdl, mod, smod, noise, oxa, oya, oxb, oyb,
+             lim):  # pragma: no cover
     rows, width = src.shape[0], src.shape[1]
     ch = np.uint64(src.shape[2])
     cau, cbu = np.uint64(ca), np.uint64(cb)

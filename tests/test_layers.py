@@ -162,7 +162,8 @@ def test_no_payload_struct_format_outside_the_protocol_module():
     them.  (File formats, e.g. BMP headers in rip/load.py, are not payloads.)"""
     offenders = []
     for name, path in MODULES.items():
-        if name == "wideprint.driver.protocol" or not name.startswith((f"{PKG}.driver", f"{PKG}.device_sim", f"{PKG}.app")):
+        if name == "wideprint.driver.protocol" or \
+                not name.startswith((f"{PKG}.driver", f"{PKG}.device_sim", f"{PKG}.app")):
             continue
         text = path.read_text()
         if "struct.pack" in text or "struct.unpack" in text or "_FMT" in text:

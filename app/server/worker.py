@@ -410,7 +410,6 @@ class Worker(threading.Thread):
                 return group
         if length:
             from ...rip.layout import plan_layout
-            from .validate import rip_settings, with_icc_paths
             try:
                 plan = plan_layout([j["spool_path"] for j in group], rip_settings(first["settings"]),
                                    self.profile, self.paper_mm)
@@ -596,9 +595,10 @@ class Worker(threading.Thread):
                     if exc.fault and not self.stopping:
                         # the printer's fault, not the job's: this printer stops at the job,
                         # which keeps its checkpoint until the operator clears the fault
-                        row = self._print_row(job, copy, started, pj.report, "stopped",
-                                              str(exc), resumed)
-                        self._durable(lambda: self.spool.stop_for_fault(job_id, str(exc), row),
+                        why = str(exc)
+                        row = self._print_row(job, copy, started, pj.report, "stopped", why,
+                                              resumed)
+                        self._durable(lambda: self.spool.stop_for_fault(job_id, why, row),
                                       f"job {job_id}'s stop")
                         self.fault = str(exc)
                         self.printer_state, self.printer_error = "fault", str(exc)
