@@ -16,9 +16,9 @@ import re
 import struct
 import zlib
 from collections import namedtuple
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -214,6 +214,11 @@ STATUS_CONFIGURED = 1 << 6
 STATUS_FIRING = 1 << 7
 
 
+def _record_type(typename: str, names: tuple[str, ...]) -> Any:
+    """A layout's record: a namedtuple of its field names, made when the layout is declared."""
+    return namedtuple(typename, names)
+
+
 # -- CRCs --------------------------------------------------------------------------------
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
     """CRC-16/CCITT-FALSE (section 2.2): poly 0x1021, init 0xFFFF, no reflection, no final
@@ -221,9 +226,10 @@ def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
     return binascii.crc_hqx(data, crc)
 
 
-def crc32(data) -> int:
+def crc32(data: bytes | bytearray | memoryview | np.ndarray) -> int:
     """CRC-32/ISO-HDLC (zlib.crc32), as used by the data channel."""
-    return zlib.crc32(data) & 0xFFFFFFFF
+    # an ndarray is a buffer, which numpy's stubs do not say
+    return zlib.crc32(data) & 0xFFFFFFFF  # type: ignore[arg-type]
 
 
 # -- command-channel frames (section 2.2) ----------------------------------------------------
@@ -353,7 +359,8 @@ class Layout:
             else:
                 raise ValueError(f"layout {spec!r}: unknown type {typ!r}")
         self.names = tuple(name for name, _, _ in self.fields)
-        self.record = namedtuple(typename, self.names)
+        # a record type made at run time: typed as Any (mypy knows only declared NamedTuples)
+        self.record: Any = _record_type(typename, self.names)
         self.struct = struct.Struct(fmt)
         self.size = self.struct.size        # of the fixed part; the tail adds to it
         self._keys = frozenset(self.names)
@@ -373,21 +380,21 @@ class Layout:
         return f"Layout({self.spec!r})"
 
     # -- bytes -> record -------------------------------------------------------------------
-    def decode(self, data: bytes):
+    def decode(self, data: bytes) -> Any:
         return self.record._make(self.decode_values(data))
 
-    def decode_values(self, data: bytes) -> tuple | list:
+    def decode_values(self, data: bytes) -> tuple[Any, ...] | list[Any]:
         """The field values in declaration order; BadLength when the length does not fit."""
         n = len(data)
         if self.tail is None:
             if n != self.size:
                 raise BadLength(f"{n} bytes, {self.record.__name__} has {self.size}")
-        elif n < self.size or (self.tail == "group" and (n - self.size) % self.group.size):
+        elif n < self.size or (self.group is not None and (n - self.size) % self.group.size):
             raise BadLength(f"{n} bytes do not fit {self.record.__name__} ({self.spec})")
         values = self.struct.unpack_from(data)
         if self._plain:                     # the common case: integers only
             return values
-        out = []
+        out: list[Any] = []
         for kind, i, j in self._plan:
             if kind == "int":
                 out += values[i:j]
@@ -401,28 +408,29 @@ class Layout:
                 out.append(tuple(d for b in data[self.size:] for d in (b & 0x0F, b >> 4)))
             else:
                 g = self.group
+                assert g is not None          # kind "group": the layout has one
                 out.append(tuple(map(g.record._make, g.struct.iter_unpack(data[self.size:]))))
         return out
 
     # -- fields -> bytes -------------------------------------------------------------------
-    def encode(self, **values) -> bytes:
+    def encode(self, **values: Any) -> bytes:
         if values.keys() != self._keys:
             missing = [k for k in self.names if k not in values]
             extra = [k for k in values if k not in self._keys]
             raise LayoutError(f"{self.record.__name__}: missing {missing}, unknown {extra}")
         return self._pack([values[k] for k in self.names])
 
-    def encode_values(self, values) -> bytes:
+    def encode_values(self, values: Any) -> bytes:
         """Encode from values in declaration order (a record or a tuple)."""
         values = list(values)
         if len(values) != len(self.names):
             raise LayoutError(f"{self.record.__name__}: {len(values)} values for {self.names}")
         return self._pack(values)
 
-    def _pack(self, values: list) -> bytes:
+    def _pack(self, values: list[Any]) -> bytes:
         tail = b""
         if not self._plain:
-            flat = []
+            flat: list[Any] = []
             for (name, kind, count), v in zip(self.fields, values):
                 if kind == "int":
                     flat.append(v)
@@ -443,6 +451,7 @@ class Layout:
                     tail = pack_digits(list(v))
                 else:
                     g = self.group
+                    assert g is not None      # kind "group": the layout has one
                     tail = b"".join(g.encode(**r) if isinstance(r, Mapping) else g.encode_values(r)
                                     for r in v)
             values = flat
@@ -512,21 +521,21 @@ decl(Op.SERVICE_STATUS, response="capped:u8 wet_clock_ms:u32 spit_age_ms:u32[8]"
 decl(Op.JOB_STATUS, response="boot:u32 job:u32 job_state:u8 lines_done:u32 last_stroke:u32")
 
 
-def encode_request(op: int, **values) -> bytes:
+def encode_request(op: int, **values: Any) -> bytes:
     return COMMANDS[op].request.encode(**values)
 
 
-def decode_request(op: int, payload: bytes):
+def decode_request(op: int, payload: bytes) -> Any:
     """Raises BadLength when the payload does not fit (section 2.4 BAD_LENGTH)."""
     return COMMANDS[op].request.decode(payload)
 
 
-def encode_response(op: int, **values) -> bytes:
+def encode_response(op: int, **values: Any) -> bytes:
     """The response data after the result byte (section 2.4)."""
     return COMMANDS[op].response.encode(**values)
 
 
-def decode_response(op: int, data: bytes):
+def decode_response(op: int, data: bytes) -> Any:
     """`data`: the response payload after the result byte."""
     return COMMANDS[op].response.decode(data)
 
@@ -556,7 +565,7 @@ class Status:
             raise BadLength("an empty GET_STATUS payload")
         return cls(payload[0], *_STATUS.decode_values(payload[1:]))
 
-    def response_values(self) -> tuple:
+    def response_values(self) -> tuple[Any, ...]:
         """The declared response fields in order (everything but the result byte)."""
         return _status_values(self)
 
@@ -672,7 +681,7 @@ class BlockDecoder:
 
 
 def encode_report(flags: int, ring_free: int, stroke: int, blocks: int, fires_done: int,
-                  fifo) -> bytes:
+                  fifo: Iterable[int]) -> bytes:
     """One report (section 3.2): its fields in, its bytes out (the emulator's FPGA sends one
     a block, so without a Report object in between)."""
     body = REPORT.pack(REPORT_MAGIC, REPORT_TYPE, flags, ring_free, stroke, blocks, fires_done,
@@ -845,5 +854,5 @@ def encode_dma_desc(padr: int, ladr: int, size: int, dpr: int) -> bytes:
     return DMA_DESC.pack(padr, ladr, size, dpr)
 
 
-def decode_dma_desc(data) -> DmaDesc:
+def decode_dma_desc(data: bytes | bytearray | memoryview) -> DmaDesc:
     return DmaDesc(*DMA_DESC.unpack(bytes(data[:DMA_DESC.size])))
