@@ -557,8 +557,14 @@ class PrintJob:
                 self.on_event("stroke", index=stroke.index, total=planner.total_strokes,
                               direction=stroke.direction, fires=stroke.fires)
                 used = nozzles_used(stroke.words)
-                wet = self._recovering(lambda: self.care.before_stroke(used),
-                                       f"head care before stroke {stroke.index}")
+                if self._in_line(stroke):
+                    # the resumed stroke's line is still going (starved when the host went
+                    # away): the heads are mid-line, a spit would be refused BUSY
+                    wet = (self._recovering(self.care.now_ms, "the drying clock")
+                           if self.care.active else 0)
+                else:
+                    wet = self._recovering(lambda: self.care.before_stroke(used),
+                                           f"head care before stroke {stroke.index}")
                 rep.spits = self.care.spits - spits0
                 self.print_stroke(stroke, x0)
                 self.care.after_stroke(used, wet)
@@ -607,6 +613,14 @@ class PrintJob:
             rep.area_m2 = (rip.width * k / prof.counts_per_inch * 0.0254) * \
                 (rip.height * prof.row_um * 1e-6)
         return rep
+
+    def _in_line(self, stroke: StrokeData) -> bool:
+        """Whether the printer is in this stroke's line already: only the stroke a resumed
+        job stopped in can be (docs/driver.md, recovery)."""
+        if self.resume is None or stroke.index != resume_stroke(self.resume):
+            return False
+        st = self._recovering(self.dev.link.status, f"status before stroke {stroke.index}")
+        return st.motion == P.Motion.PRINTING and st.stroke == stroke.index
 
     def _count_on_sheet(self, strokes, n: int) -> None:
         """The report of a job that stops before printing: the strokes before `n` (those

@@ -115,3 +115,57 @@ def test_a_fresh_job_stops_a_line_an_earlier_host_left_running(tmp_path, profile
         dev.emulator.close()
     assert rep.state == "done"
     assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
+
+
+def test_a_resumed_job_spits_not_into_its_own_starved_line(tmp_path, profile):
+    """The host died in the middle of stroke 3, its line starving; the resumed job's head
+    care (a new server's: every nozzle idle for ever) must not spit before the line it
+    resumes - refused BUSY, the job failed (found by bench/crash_soak.py: 'refused SPIT:
+    BUSY').  The dead host's last steps are replayed from a reference print's events."""
+    from wideprint.driver import protocol as P
+    from wideprint.driver.headcare import NEVER, HeadCare
+    from wideprint.driver.job import JobCancelled
+    from wideprint.driver.printer import Printer
+    planes = random_planes(900, 400, seed=42)
+    src = write_cmyk_tiff(tmp_path / "in.tif", planes)
+    settings = RipSettings(placement=PX, passes=2)
+    ref = open_device("emulator", profile, media_path=str(tmp_path / "ref.tif"))
+    PrintJob(ref, RipJob(str(src), settings, profile)).run()
+    ref.emulator.close()
+    ev = list(ref.emulator.events)
+    i3 = next(i for i, e in enumerate(ev) if e["event"] == "set_line" and e["stroke"] == 3)
+    line = ev[i3]
+    paper = [e for e in ev[:i3] if e["event"] == "feed"][-1]["paper_steps"]
+
+    dev = open_device("emulator", profile, Faults(starve_guard=1), media_path=str(tmp_path / "m.tif"))
+    checkpoints = []
+
+    def on_event(kind, **kw):
+        if kind == "checkpoint":
+            checkpoints.append(kw["checkpoint"])
+            if kw["checkpoint"].get("next_stroke") == 3:
+                first.control.cancel()
+    first = PrintJob(dev, RipJob(str(src), settings, profile), on_event=on_event)
+    with pytest.raises(JobCancelled):
+        first.run()
+    link, printer = dev.link, Printer(dev)
+    # what the dead host did next: feed, set stroke 3's line, start it; its data never came
+    printer.feed_steps(paper - link.status().paper_steps)
+    link.call(P.Op.SET_LINE, stroke=3, direction=line["direction"], dpi=line["dpi"],
+              fire_start=line["first"], fire_count=line["count"], speed=line["speed"],
+              accel=line["accel"])
+    link.write_reg(P.REG_DIR, 1 if line["direction"] == 0 else 0)
+    link.write_reg(P.REG_DPI, P.DPI_CODE[line["dpi"]])
+    link.write_reg(P.REG_WE_EN, 1)
+    link.command(P.Op.START_LINE)
+    st = link.status()
+    assert st.motion == P.Motion.PRINTING and st.stroke == 3       # starved at its start
+    care = HeadCare(printer)
+    care.status()
+    care.last_fire[:] = NEVER
+    again = PrintJob(dev, RipJob(str(src), settings, profile), resume=checkpoints[-1],
+                     head_care=care)
+    rep = again.run()
+    dev.emulator.close()
+    assert rep.state == "done", rep.message
+    assert np.array_equal(read_planes(tmp_path / "m.tif"), planes)
