@@ -18,9 +18,14 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
+
+if TYPE_CHECKING:       # types only: each is imported where it is used, on first use
+    from ..rip.profile import Profile
+    from ..rip.settings import RipSettings
+    from .scancheck import ScanComparison, ScanTolerances
 
 API_VERSION = "1.1"      # 1.1: scans (predict_scan, compare_scan, scan_dpi / scan_out)
 COLORS = "CMYK"
@@ -31,14 +36,14 @@ __all__ = ["API_VERSION", "Comparison", "EmulatedPrinter", "PrintResult", "compa
 
 
 # -- settings and profiles -----------------------------------------------------------------
-def load_profile(path: str | Path | None = None):
+def load_profile(path: str | Path | None = None) -> Profile:
     """The printer profile (default: the built-in one), validated (ProfileError names the
     file, section and key)."""
     from ..rip.profile import load_profile as _load
     return _load(path)
 
 
-def rip_settings(settings: Any = None, profile=None, **kw):
+def rip_settings(settings: Any = None, profile: Profile | None = None, **kw: Any) -> RipSettings:
     """RipSettings from a RipSettings, a settings mapping (docs/settings.md: placement in a
     nested "placement" object) and/or keyword settings (placement ones allowed flat, e.g.
     size="pixels"), checked against the printer profile; ValueError names the setting."""
@@ -63,8 +68,8 @@ def read_planes(path: str | Path) -> np.ndarray:
     return _read(path)
 
 
-def rip(file: str | Path, settings: Any = None, *, profile=None, out: str | Path | None = None,
-        **kw) -> np.ndarray:
+def rip(file: str | Path, settings: Any = None, *, profile: Profile | None = None,
+        out: str | Path | None = None, **kw: Any) -> np.ndarray:
     """The halftone the RIP means for `file` (what `wideprint rip` writes), as a planes array;
     also written to `out` when given.  Raises rip.load.ImageError for a file it cannot read."""
     from ..rip.pipeline import RipJob
@@ -87,10 +92,10 @@ class PrintResult:
     file: str
     state: str                          # done | failed | cancelled
     message: str = ""
-    report: dict = field(default_factory=dict)      # the job report (`print --report` keys)
+    report: dict[str, Any] = field(default_factory=dict)  # the job report (`print --report` keys)
     media: np.ndarray | None = None     # what landed (emulator only), planes layout
     media_path: Path | None = None
-    events: list = field(default_factory=list)      # the emulator's event log records
+    events: list[dict[str, Any]] = field(default_factory=list)  # the emulator's event log records
     settings: Any = None                # the RipSettings it was printed with
     profile: Any = None
     planes: np.ndarray | None = None    # test prints: the pattern's planes
@@ -119,20 +124,20 @@ class EmulatedPrinter:
             result = printer.print("chart.tif", passes=2)
     """
 
-    def __init__(self, profile=None, *, faults: Iterable[str] | None = None,
-                 device: str = "emulator", machine_profile=None,
-                 workdir: str | Path | None = None, scan_dpi: float | None = None):
+    def __init__(self, profile: Profile | str | Path | None = None, *,
+                 faults: Iterable[str] | None = None, device: str = "emulator",
+                 machine_profile: Profile | None = None,
+                 workdir: str | Path | None = None, scan_dpi: float | None = None) -> None:
         from ..device_sim.faults import Faults
         from .devices import is_emulator_spec, open_device
-        self.profile = profile if profile is not None else load_profile()
-        if isinstance(self.profile, (str, Path)):
-            self.profile = load_profile(self.profile)
+        self.profile: Profile = (load_profile(profile) if isinstance(profile, (str, Path)) else
+                                 profile if profile is not None else load_profile())
         self.device_spec = device
         self.emulated = is_emulator_spec(device)
         self.faults = Faults.parse(list(faults or []))
         if faults and not self.emulated:
             raise ValueError("faults can only be injected into the emulator")
-        self._tmp = None
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
         if workdir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="wideprint-printer-")
             workdir = self._tmp.name
@@ -141,7 +146,7 @@ class EmulatedPrinter:
         self._media: dict[int, Path] = {}
         self._scans: dict[int, Path] = {}
         self.jobs = 0
-        scan = {}
+        scan: dict[str, Any] = {}
         if scan_dpi is not None:            # the emulator scans each job (docs/physical.md)
             if not self.emulated:
                 raise ValueError("only the emulator scans its prints")
@@ -152,11 +157,11 @@ class EmulatedPrinter:
                                   machine_profile=machine_profile, **scan)
 
     @property
-    def emulator(self):
+    def emulator(self) -> Any:
         return self.device.emulator
 
     def print(self, file: str | Path, settings: Any = None, *, media_out: str | Path | None = None,
-              scan_out: str | Path | None = None, **kw) -> PrintResult:
+              scan_out: str | Path | None = None, **kw: Any) -> PrintResult:
         """Rip and print one file; never raises for a job that fails (the result says why),
         only for settings that are refused (ValueError)."""
         from ..rip.load import ImageError
@@ -183,7 +188,8 @@ class EmulatedPrinter:
                              profile=self.profile, planes=job.planes)
         return self._run(job, result, media_out)
 
-    def _run(self, rip_job, result: PrintResult, media_out, scan_out=None) -> PrintResult:
+    def _run(self, rip_job: Any, result: PrintResult, media_out: str | Path | None,
+             scan_out: str | Path | None = None) -> PrintResult:
         self.jobs += 1
         job_id = self.jobs
         media = Path(media_out) if media_out else self.workdir / f"media-{job_id}.tif"
@@ -213,7 +219,7 @@ class EmulatedPrinter:
     def __enter__(self) -> "EmulatedPrinter":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -223,11 +229,11 @@ class JobRun:
     job: Any
     state: str                          # done | failed | cancelled
     message: str
-    report: dict
+    report: dict[str, Any]
 
 
-def run_job(device, rip_job, job_id: int, *, on_event=None, on_job=None,
-            internal_errors: bool = False) -> JobRun:
+def run_job(device: Any, rip_job: Any, job_id: int, *, on_event: Callable[..., Any] | None = None,
+            on_job: Callable[[Any], Any] | None = None, internal_errors: bool = False) -> JobRun:
     """The job engine of `EmulatedPrinter.print` and `wideprint print` alike: one ripped job
     printed on an open device, the RIP job closed after it.  A job that fails or is
     cancelled does not raise: the JobRun says why (`internal_errors`: any other exception,
@@ -266,8 +272,8 @@ def run_job(device, rip_job, job_id: int, *, on_event=None, on_job=None,
 
 
 def print_file(file: str | Path, settings: Any = None, *, device: str = "emulator",
-               profile=None, faults: Iterable[str] | None = None,
-               media_out: str | Path | None = None, **kw) -> PrintResult:
+               profile: Profile | str | Path | None = None, faults: Iterable[str] | None = None,
+               media_out: str | Path | None = None, **kw: Any) -> PrintResult:
     """Print one file on a fresh printer (the in-process emulator by default) and return
     what happened: the report, and on the emulator the media that landed (also written to
     `media_out` when given)."""
@@ -280,7 +286,7 @@ def print_file(file: str | Path, settings: Any = None, *, device: str = "emulato
 
 
 def predict_scan(file: str | Path, out: str | Path, settings: Any = None, *, scan_dpi: float = 600,
-                 grey: bool = False, profile=None, **kw) -> Path:
+                 grey: bool = False, profile: Profile | str | Path | None = None, **kw: Any) -> Path:
     """The physical model's prediction of a scan of this job (docs/acceptance.md): the job
     printed on a perfect emulated machine and scanned at `scan_dpi` without sensor noise,
     written to `out` (an RGB TIFF, or grey, with its resolution)."""
@@ -293,7 +299,8 @@ def predict_scan(file: str | Path, out: str | Path, settings: Any = None, *, sca
     return Path(out)
 
 
-def compare_scan(scan: str | Path, predicted: str | Path, tolerances=None):
+def compare_scan(scan: str | Path, predicted: str | Path,
+                 tolerances: ScanTolerances | None = None) -> ScanComparison:
     """A scan of a print against the predicted scan (predict_scan): registered, then ink
     density, rows and dot positions within `tolerances` (a ScanTolerances; the defaults are
     docs/acceptance.md's).  Returns a ScanComparison: `ok`, `problems`, `explain()`."""
@@ -306,14 +313,14 @@ def compare_scan(scan: str | Path, predicted: str | Path, tolerances=None):
 class Comparison:
     """Media against planes, dot for dot."""
     equal: bool
-    shape_a: tuple
-    shape_b: tuple
+    shape_a: tuple[int, ...]
+    shape_b: tuple[int, ...]
     differing: int = 0
-    missing: list = field(default_factory=lambda: [0] * 4)   # per channel: in b, not in a
-    stray: list = field(default_factory=lambda: [0] * 4)     # per channel: in a, not in b
-    drops_a: list = field(default_factory=lambda: [0] * 4)
-    drops_b: list = field(default_factory=lambda: [0] * 4)
-    first: list = field(default_factory=list)                 # [(row, column, "C", a, b)]
+    missing: list[int] = field(default_factory=lambda: [0] * 4)   # per channel: in b, not in a
+    stray: list[int] = field(default_factory=lambda: [0] * 4)     # per channel: in a, not in b
+    drops_a: list[int] = field(default_factory=lambda: [0] * 4)
+    drops_b: list[int] = field(default_factory=lambda: [0] * 4)
+    first: list[tuple[int, int, str, int, int]] = field(default_factory=list)  # (row, column, "C", a, b)
 
     def explain(self, a_name: str = "media", b_name: str = "planes") -> str:
         if self.shape_a != self.shape_b:
@@ -333,7 +340,7 @@ class Comparison:
         return "\n".join(lines)
 
 
-def _as_planes(x) -> np.ndarray:
+def _as_planes(x: Any) -> np.ndarray:
     if isinstance(x, (str, Path)):
         return read_planes(x)
     if isinstance(x, PrintResult):
@@ -343,7 +350,7 @@ def _as_planes(x) -> np.ndarray:
     return np.asarray(x)
 
 
-def compare(a, b, first: int = 10) -> Comparison:
+def compare(a: Any, b: Any, first: int = 10) -> Comparison:
     """Compare two planes arrays, planes/media TIFFs or a PrintResult's media."""
     a, b = _as_planes(a), _as_planes(b)
     cmp = Comparison(equal=False, shape_a=a.shape, shape_b=b.shape)
@@ -363,7 +370,7 @@ def compare(a, b, first: int = 10) -> Comparison:
     return cmp
 
 
-def diff_image(a, b, path: str | Path, max_side: int = 2000) -> Path:
+def diff_image(a: Any, b: Any, path: str | Path, max_side: int = 2000) -> Path:
     """A PNG of where two planes differ: grey where they agree on a drop, red where b has a
     drop a lacks (missing), blue where a has one b lacks (stray), white elsewhere; area
     reduced (a differing dot in a block colours the block) to at most `max_side` pixels."""
@@ -380,7 +387,7 @@ def diff_image(a, b, path: str | Path, max_side: int = 2000) -> Path:
     step = max(1, -(-max(h, w) // max_side))
     if step > 1:                                   # block-reduce: any differing dot shows
         hh, ww = -(-h // step) * step, -(-w // step) * step
-        def red(m):
+        def red(m: Any) -> Any:         # numpy types .any(axis=) as an array or a scalar
             m2 = np.zeros((hh, ww), bool)
             m2[:h, :w] = m
             return m2.reshape(hh // step, step, ww // step, step).any(axis=(1, 3))
