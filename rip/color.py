@@ -35,6 +35,19 @@ from .settings import INTENTS  # noqa: E402 - declared with the settings schema
 LUT3_SIZE = 33  # grid for 3-channel input (same as lcms for 8-bit RGB)
 
 
+# The shipped default media's ICC output profile (docs/media.md, made by `wideprint media
+# create` on the default emulated printer): separations of RGB and grey use it when a job
+# names neither a media nor an output profile.  CMYK files still print as they are.
+DEFAULT_OUTPUT_ICC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                  "resources", "media", "vinyl-300", "profile.icc")
+
+
+def default_output_icc(colorspace: str) -> str | None:
+    """The output profile of a job that names none: the default media's for RGB and grey
+    (None for CMYK, or if the file is not installed: then libvips' built-in `cmyk`)."""
+    return DEFAULT_OUTPUT_ICC if colorspace != "cmyk" and os.path.isfile(DEFAULT_OUTPUT_ICC) else None
+
+
 def ink_limit_level(ink_limit: float) -> int:
     """Total area coverage limit in percent -> the largest allowed C+M+Y+K sum in 0..255 units."""
     return int(np.floor(ink_limit * 255.0 / 100.0 + 1e-9))

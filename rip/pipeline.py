@@ -12,7 +12,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .color import Separator
+from .color import Separator, default_output_icc
 from .halftone import ORDERED, Halftoner
 from .inputs import open_source, prescreened_packed
 from .load import ImageSource, open_image  # noqa: F401 - re-exported
@@ -159,7 +159,8 @@ class RipJob(PrintableJob):
                              curves=profile_curves(self.profile, s.dpi))
         return Separator(self.source.colorspace, self.source.depth,
                          embedded_icc=self.source.icc, input_icc=s.input_icc,
-                         output_icc=s.output_icc, intent=s.intent, ink_limit=self.ink_limit,
+                         output_icc=s.output_icc or default_output_icc(self.source.colorspace),
+                         intent=s.intent, ink_limit=self.ink_limit,
                          curves=profile_curves(self.profile, s.dpi))
 
     def _dead_rows(self):
