@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, Callable
+from typing import Any, Callable, Iterable, Mapping
 
 # -- the choices (the RIP's modules import these names from here) ------------------------
 METHODS = ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise")   # rip/halftone.py
@@ -56,14 +56,14 @@ class Setting:
     default: Any
     help: str
     group: str = "rip"             # "rip": RipSettings; "placement": Placement
-    choices: tuple | None = None   # the allowed values, when fixed
-    profile_choices: Callable | None = None   # Profile -> allowed values (dpi modes)
+    choices: tuple[Any, ...] | None = None   # the allowed values, when fixed
+    profile_choices: Callable[[Any], Iterable[Any]] | None = None   # Profile -> allowed values (dpi modes)
     minimum: float | None = None
     maximum: float | None = None
     nullable: bool = False         # None allowed (means: the profile's / file's value)
     nonnegative: bool = False
     positive: bool = False
-    labels: dict | None = None     # choice -> words for the GUI
+    labels: dict[Any, str] | None = None     # choice -> words for the GUI
     section: str = ""              # the command line's option group, when not the group's own
     label: str = ""                # the GUI's name for it
     metavar: str | None = None
@@ -76,12 +76,12 @@ class Setting:
     def where(self) -> str:
         return f"placement {self.name}" if self.group == "placement" else self.name
 
-    def choices_for(self, profile=None) -> tuple | None:
+    def choices_for(self, profile: Any = None) -> tuple[Any, ...] | None:
         if self.profile_choices is not None and profile is not None:
             return tuple(self.profile_choices(profile))
         return self.choices
 
-    def check(self, value, profile=None):
+    def check(self, value: Any, profile: Any = None) -> Any:
         """The value, normalised (ints as int, numbers as float), or SettingsError."""
         if value is None:
             if self.nullable:
@@ -122,11 +122,11 @@ class Setting:
         return value
 
 
-def _words(choices) -> str:
+def _words(choices: Iterable[Any]) -> str:
     return ", ".join(str(c) for c in choices)
 
 
-def _dpi_modes(profile) -> tuple:
+def _dpi_modes(profile: Any) -> tuple[Any, ...]:
     return tuple(profile.dpi_modes)
 
 
@@ -394,7 +394,7 @@ class Placement:
         return self.rotate in (90, 270)
 
     def target_size(self, src_w: int, src_h: int, xres: float | None, yres: float | None,
-                    dpi: int, row_um: float) -> tuple[int, int]:
+                    dpi: float, row_um: float) -> tuple[int, int]:
         """(width in device columns, height in device rows) after rotation."""
         self.check()
         src_w, src_h = int(src_w), int(src_h)
@@ -409,9 +409,10 @@ class Placement:
         if xr is None and yr is None:
             xr = yr = DEFAULT_PPI
         xr, yr = xr or yr, yr or xr  # only one tag: square pixels
+        assert xr is not None and yr is not None
         return self.target_size_inches(src_w / xr, src_h / yr, dpi, row_um)
 
-    def target_size_inches(self, w_in: float, h_in: float, dpi: int, row_um: float) -> tuple[int, int]:
+    def target_size_inches(self, w_in: float, h_in: float, dpi: float, row_um: float) -> tuple[int, int]:
         """(columns, rows) after rotation for a source of w_in x h_in inches (unrotated):
         the arithmetic of target_size() from the physical size on; documents use it with
         their page size (`size` "pixels" counts as "physical" here)."""
@@ -435,7 +436,9 @@ class Placement:
         if self.width_mm is not None and self.height_mm is not None:
             w_in, h_in = float(self.width_mm) / MM_PER_INCH, float(self.height_mm) / MM_PER_INCH
         elif self.width_mm is not None or self.fit_width_mm is not None:
-            want = float(self.width_mm if self.width_mm is not None else self.fit_width_mm) / MM_PER_INCH
+            mm = self.width_mm if self.width_mm is not None else self.fit_width_mm
+            assert mm is not None
+            want = float(mm) / MM_PER_INCH
             w_in, h_in = want, h_in * want / w_in
         elif self.height_mm is not None:
             want = float(self.height_mm) / MM_PER_INCH
@@ -467,7 +470,7 @@ def parse_pages(text: str) -> list[tuple[int, int | None]]:
     return out
 
 
-def _check_target(w, h, what: str) -> tuple[int, int]:
+def _check_target(w: float, h: float, what: str) -> tuple[int, int]:
     if not (w >= 1 and h >= 1):
         raise ValueError(f"placement: the placed image would be {w} x {h} dots{what}: nothing to print "
                          f"(0 px); check the size options")
@@ -494,7 +497,7 @@ class RipSettings:
     band_rows: int = 64          # rows per band: 64 keeps a 40,000 px wide job small
     placement: Placement = field(default_factory=Placement)   # physical size by default
 
-    def check(self, profile) -> None:
+    def check(self, profile: Any) -> None:
         """Every setting against the schema and the printer profile, then the placement's
         consistency; SettingsError (a ValueError) naming the setting."""
         for s in SETTINGS:
@@ -502,7 +505,7 @@ class RipSettings:
             s.check(getattr(obj, s.name), profile)
         self.placement.check()
 
-    def as_mapping(self) -> dict:
+    def as_mapping(self) -> dict[str, Any]:
         """The settings as a JSON-able mapping (placement nested), for the spool and reports."""
         out = {k: getattr(self, k) for k in RIP_KEYS}
         out["placement"] = asdict(self.placement)
@@ -515,14 +518,14 @@ assert {f.name for f in fields(RipSettings)} - {"band_rows", "placement"} == set
 
 
 # -- mappings: requests, presets, saved settings -------------------------------------------
-def validate(mapping, profile=None) -> dict:
+def validate(mapping: Any, profile: Any = None) -> dict[str, Any]:
     """A settings mapping (a request's, a preset's: only the keys given) checked against
     the schema and the printer profile: known keys only, right types, allowed values.
     Placement settings go in a nested "placement" object.  Returns the normalised mapping;
     SettingsError names the setting and the problem."""
     if not isinstance(mapping, dict):
         raise SettingsError("settings must be a JSON object")
-    out: dict = {}
+    out: dict[str, Any] = {}
     for key, value in mapping.items():
         if key == "placement":
             out["placement"] = validate_placement(value)
@@ -535,10 +538,10 @@ def validate(mapping, profile=None) -> dict:
     return out
 
 
-def validate_placement(mapping) -> dict:
+def validate_placement(mapping: Any) -> dict[str, Any]:
     if not isinstance(mapping, dict):
         raise SettingsError("placement must be a JSON object")
-    out = {}
+    out: dict[str, Any] = {}
     for key, value in mapping.items():
         s = BY_NAME.get(key)
         if s is None or s.group != "placement":
@@ -551,7 +554,8 @@ def validate_placement(mapping) -> dict:
     return out
 
 
-def from_mapping(mapping=None, profile=None, **overrides) -> RipSettings:
+def from_mapping(mapping: Mapping[str, Any] | None = None, profile: Any = None,
+                 **overrides: Any) -> RipSettings:
     """RipSettings from a settings mapping (checked with `validate`), the schema's defaults
     for everything not given; `overrides` are internal fields such as band_rows."""
     checked = validate(mapping or {}, profile)
@@ -562,10 +566,10 @@ def from_mapping(mapping=None, profile=None, **overrides) -> RipSettings:
     return rs
 
 
-def merge(*mappings) -> dict:
+def merge(*mappings: Mapping[str, Any] | None) -> dict[str, Any]:
     """Settings mappings overlaid left to right (a preset, then a request's own settings);
     placement fields merge one by one."""
-    out: dict = {}
+    out: dict[str, Any] = {}
     for m in mappings:
         for k, v in (m or {}).items():
             if k == "placement":
@@ -590,7 +594,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             group.add_argument(s.flag, dest=s.name, action=argparse.BooleanOptionalAction,
                                default=argparse.SUPPRESS, help=s.help + default)
             continue
-        kw: dict = dict(dest=s.name, default=argparse.SUPPRESS, help=s.help + default,
+        kw: dict[str, Any] = dict(dest=s.name, default=argparse.SUPPRESS, help=s.help + default,
                         type={int: int, float: float, str: str}[s.kind])
         if s.choices is not None:
             kw["choices"] = s.choices
@@ -601,13 +605,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         group.add_argument(s.flag, **kw)
 
 
-def _cli_value(v) -> str:
+def _cli_value(v: Any) -> str:
     return {True: "on", False: "off"}.get(v, str(v)) if isinstance(v, bool) else str(v)
 
 
-def mapping_from_args(args: argparse.Namespace) -> dict:
+def mapping_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The settings the user gave on the command line, as a nested settings mapping."""
-    out: dict = {}
+    out: dict[str, Any] = {}
     for s in SETTINGS:
         if hasattr(args, s.name):
             value = getattr(args, s.name)
