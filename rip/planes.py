@@ -460,6 +460,9 @@ def render_rgb(planes: np.ndarray) -> np.ndarray:
     return (out * 255 + 0.5).astype(np.uint8)
 
 
+READ_BUFFER = 4 << 20      # bytes of a planes file read at once (iter_planes)
+
+
 def iter_planes(path: str | Path):
     """The planes/media TIFF (either encoding) top to bottom as (rows, width, 4) uint8
     bands, one strip or tile row at a time: memory is one band, whatever the print's length."""
@@ -469,7 +472,9 @@ def iter_planes(path: str | Path):
             raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {page.shape})")
         h, w = page.shape[:2]
         band, y0, bh = None, None, 0
-        for seg, idx, _shape in page.segments(maxworkers=1):   # one tile at a time
+        # one tile at a time, read from the file a few MB at a time (tifffile reads up to
+        # 256 MB of compressed tiles in one go by default: all of a 0.25 m2 media file)
+        for seg, idx, _shape in page.segments(maxworkers=1, buffersize=READ_BUFFER):
             y, x = idx[-3], idx[-2]
             seg = seg.reshape(seg.shape[-3:])
             if y != y0:
@@ -519,14 +524,84 @@ def _ink_lut() -> np.ndarray:
 _LUT = _ink_lut()
 
 
+def _reflect101(i: int, n: int) -> int:
+    """An index outside [0, n) mirrored about the edge samples (OpenCV's BORDER_REFLECT_101)."""
+    if n == 1:
+        return 0
+    while not 0 <= i < n:
+        i = -i if i < 0 else 2 * n - 2 - i
+    return i
+
+
+def _axis_taps(n: int, m: int, sigma: float, area: bool) -> tuple[np.ndarray, np.ndarray]:
+    """One axis of the preview's low-pass and resampling, n samples to m, as taps: output j
+    is sum_t weight[j, t] * input[index[j, t]].  A Gaussian of `sigma` samples (OpenCV's
+    GaussianBlur: 8 sigma + 1 taps, mirrored edges), then cv2.resize's INTER_AREA: with
+    `area` (both axes shrink) each output the mean of the inputs its cell covers, in part at
+    its ends; else (the picture finer than the dots on an axis) its blend of neighbours."""
+    k = max(1, int(round(sigma * 8 + 1)) | 1)
+    x = np.arange(k) - (k - 1) / 2
+    g = np.exp(-x * x / (2 * sigma * sigma))
+    g /= g.sum()
+    rows: list[dict[int, float]] = []
+    scale = n / m
+    for d in range(m):
+        taps: list[tuple[int, float]] = []
+        if area:                                       # INTER_AREA's table
+            f1 = d * scale
+            f2 = f1 + scale
+            cell = min(scale, n - f1)
+            s1, s2 = int(np.ceil(f1)), int(np.floor(f2))
+            s2 = min(s2, n - 1)
+            s1 = min(s1, s2)
+            if s1 - f1 > 1e-3:
+                taps.append((s1 - 1, (s1 - f1) / cell))
+            taps += [(i, 1.0 / cell) for i in range(s1, s2)]
+            if f2 - s2 > 1e-3:
+                taps.append((s2, min(f2 - s2, 1.0, cell) / cell))
+        else:                                          # INTER_AREA not shrinking
+            i0 = int(np.floor(d * scale))
+            f = (d + 1) - (i0 + 1) * m / n
+            f = 0.0 if f <= 0 else f - np.floor(f)
+            if i0 >= n - 1:
+                i0, f = n - 1, 0.0
+            taps = [(i0, 1.0 - f), (min(i0 + 1, n - 1), f)]
+        w: dict[int, float] = {}
+        for i, a in taps:
+            for t in range(k):
+                j = _reflect101(i + t - (k - 1) // 2, n)
+                w[j] = w.get(j, 0.0) + a * g[t]
+        rows.append(w)
+    width = max(max(w) - min(w) + 1 for w in rows)
+    index = np.zeros((m, width), np.intp)
+    weight = np.zeros((m, width), np.float32)
+    for d, w in enumerate(rows):
+        lo = min(w)
+        index[d] = np.minimum(lo + np.arange(width), n - 1)
+        for i, a in w.items():
+            weight[d, i - lo] += a
+    return index, weight
+
+
+def _dense(index: np.ndarray, weight: np.ndarray, n: int) -> np.ndarray:
+    """Taps (outputs, taps) as a dense (outputs, n) matrix."""
+    m = np.zeros((index.shape[0], n), np.float32)
+    np.add.at(m, (np.arange(index.shape[0])[:, None], index), weight)
+    return m
+
+
 def preview_image(planes_path: str | Path, max_side: int = 2000) -> np.ndarray:
     """An sRGB picture (rows, cols, 3) of a planes/media TIFF at its true physical aspect
     (the device grid is 300 x 370.5 dots per inch: a square prints square), low-passed
-    as the eye sees a print from a distance (area sums, then a Gaussian of half a picture
-    pixel: no aliasing, no beat between dot patterns and pixels), at most `max_side` pixels a
-    side and never finer than the finer dot pitch.  Built band by band: memory is a band plus
-    the picture, whatever the print's length."""
-    import cv2
+    as the eye sees a print from a distance (area sums, then a Gaussian of about 0.7 of a
+    picture pixel: no aliasing, no beat between dot patterns and pixels), at most `max_side`
+    pixels a side and never finer than the finer dot pitch.
+
+    Streamed: each band of dots is summed into whole-dot boxes, the finished rows of boxes
+    are filtered and resampled across (`_axis_taps`), and each picture row is made down the
+    page as soon as the box rows it needs are in.  Memory is a band, a few rows of boxes and
+    the picture itself (12 MB at 2000 x 2000), whatever the print's size: holding every box
+    of a 0.25 m2 print, as it once did, took ~200 MB."""
     with tifffile.TiffFile(str(planes_path)) as tf:
         page = tf.pages[0]
         h, w = page.shape[:2]
@@ -537,26 +612,65 @@ def preview_image(planes_path: str | Path, max_side: int = 2000) -> np.ndarray:
     # whole-dot boxes at about the picture's resolution first (integer sums of the ink
     # colours of every dot), then the exact physical size
     bx, by = max(1, w // out_w), max(1, h // out_h)
-    inter_w, pad = -(-w // bx), (-w) % bx
-    inter_h = -(-h // by)
-    sums = np.zeros((inter_h, inter_w, 3), np.uint32)        # small: ~ twice the picture
-    y = 0
-    for band in iter_planes(planes_path):
-        _box_sums(band, y, by, bx, _LUT, sums)
-        y += band.shape[0]
+    inter_w, inter_h = -(-w // bx), -(-h // by)
     cols = np.full(inter_w, float(bx), np.float32)           # dots in each box: whole
-    cols[-1] = bx - pad                                       # boxes but the last column
-    rows = np.full(inter_h, float(by), np.float32)            # and the last row of boxes
-    rows[-1] = h - (inter_h - 1) * by
-    inter = np.divide(sums, (rows[:, None] * cols[None, :])[..., None], dtype=np.float32)
-    del sums
-    # a gentle low-pass of about a picture pixel (as the eye sees a print from a distance):
-    # no beat between a dot pattern and the pixel grid survives it
-    sx, sy = inter.shape[1] / out_w, inter.shape[0] / out_h
-    inter = cv2.GaussianBlur(inter, (0, 0), sigmaX=0.7 * max(sx, 1.0), sigmaY=0.7 * max(sy, 1.0))
-    out = cv2.resize(inter, (out_w, out_h), interpolation=cv2.INTER_AREA)
-    del inter
-    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+    cols[-1] = w - (inter_w - 1) * bx                         # boxes but the last column
+    last_rows = h - (inter_h - 1) * by                        # and the last row of boxes
+    area = inter_w >= out_w and inter_h >= out_h
+    xi, xw = _axis_taps(inter_w, out_w, 0.7 * max(inter_w / out_w, 1.0), area)
+    yi, yw = _axis_taps(inter_h, out_h, 0.7 * max(inter_h / out_h, 1.0), area)
+    need = yi.max(axis=1)                                     # the last box row each picture row needs
+    xblocks = []                                              # the taps across as small matrices
+    for c0 in range(0, out_w, 256):
+        c1 = min(out_w, c0 + 256)
+        lo, hi = int(xi[c0:c1].min()), int(xi[c0:c1].max()) + 1
+        xblocks.append((c0, c1, lo, hi, _dense(xi[c0:c1] - lo, xw[c0:c1], hi - lo).T.copy()))
+    out = np.empty((out_h, out_w, 3), np.uint8)
+    across: list[np.ndarray] = []                             # box rows filtered across, from `base`
+    base, done = 0, 0
+
+    def box_rows(sums: np.ndarray, r0: int) -> None:
+        """Finished box rows r0.. in: across, then every picture row they complete."""
+        nonlocal base, done
+        n = sums.shape[0]
+        counts = np.full(n, float(by), np.float32)
+        if r0 + n == inter_h:
+            counts[-1] = last_rows
+        mean = np.divide(sums, (counts[:, None, None] * cols[None, :, None]), dtype=np.float32)
+        acc = np.empty((n, out_w, 3), np.float32)
+        for c0, c1, lo, hi, m in xblocks:                 # (rows, 3, inputs) @ (inputs, outputs)
+            acc[:, c0:c1] = np.matmul(mean[:, lo:hi].transpose(0, 2, 1), m).transpose(0, 2, 1)
+        across.append(acc)
+        have = base + sum(a.shape[0] for a in across)
+        last = done
+        while last < out_h and need[last] < have:
+            last += 1
+        if last == done:
+            return
+        rows = np.concatenate(across) if len(across) > 1 else across[0]
+        down = _dense(yi[done:last] - base, yw[done:last], rows.shape[0])
+        part = (down @ rows.reshape(rows.shape[0], -1)).reshape(last - done, out_w, 3)
+        out[done:last] = np.clip(part + 0.5, 0, 255).astype(np.uint8)
+        done = last
+        keep = int(yi[done:, 0].min()) if done < out_h else have
+        across[:] = [rows[keep - base:]]
+        base = keep
+
+    y = 0
+    carry: tuple[int, np.ndarray] | None = None                # a box row the band left unfinished
+    for band in iter_planes(planes_path):
+        y1 = y + band.shape[0]
+        r0, r1 = y // by, (y1 - 1) // by + 1
+        sums = np.zeros((r1 - r0, inter_w, 3), np.uint32)
+        if carry is not None and carry[0] == r0:
+            sums[0] = carry[1]
+        _box_sums(band, y - r0 * by, by, bx, _LUT, sums)
+        finished = r1 if y1 >= h else y1 // by
+        if finished > r0:
+            box_rows(sums[:finished - r0], r0)
+        carry = (finished, sums[finished - r0].copy()) if finished < r1 else None
+        y = y1
+    return out
 
 
 def write_preview(planes_path: str | Path, png_path: str | Path, max_side: int = 2000) -> None:

@@ -104,3 +104,79 @@ def test_a_layout_previews_its_items_marks_and_gaps(tmp_path):
                            int(m.x * sx):int((m.x + m.w) * sx) + 1].any() for m in marks)
     whole = pd.estimate
     assert whole.area_m2 == pytest.approx(plan.width_mm * plan.height_mm * 1e-6)
+
+
+def _preview_whole(path, max_side=2000):
+    """The preview as it was made before it streamed (every box of the print held, then
+    cv2's GaussianBlur and INTER_AREA resize on the whole): the reference for the streamed one."""
+    import cv2
+    import tifffile
+    from wideprint.rip.planes import _LUT, _box_sums, _resolution, iter_planes
+    with tifffile.TiffFile(str(path)) as tf:
+        page = tf.pages[0]
+        h, w = page.shape[:2]
+        xres, yres = _resolution(page, "XResolution", 300.0), _resolution(page, "YResolution", 300.0)
+    scale = min(max_side / max(w / xres, h / yres), max(xres, yres))
+    out_w, out_h = max(1, round(w / xres * scale)), max(1, round(h / yres * scale))
+    bx, by = max(1, w // out_w), max(1, h // out_h)
+    inter_w, inter_h = -(-w // bx), -(-h // by)
+    sums = np.zeros((inter_h, inter_w, 3), np.uint32)
+    y = 0
+    for band in iter_planes(path):
+        _box_sums(band, y, by, bx, _LUT, sums)
+        y += band.shape[0]
+    cols = np.full(inter_w, float(bx), np.float32)
+    cols[-1] = w - (inter_w - 1) * bx
+    rows = np.full(inter_h, float(by), np.float32)
+    rows[-1] = h - (inter_h - 1) * by
+    inter = np.divide(sums, (rows[:, None] * cols[None, :])[..., None], dtype=np.float32)
+    sx, sy = inter.shape[1] / out_w, inter.shape[0] / out_h
+    inter = cv2.GaussianBlur(inter, (0, 0), sigmaX=0.7 * max(sx, 1.0), sigmaY=0.7 * max(sy, 1.0))
+    out = cv2.resize(inter, (out_w, out_h), interpolation=cv2.INTER_AREA)
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("shape, max_side", [((3000, 4100), 800), ((1234, 2345), 2000),
+                                             ((90, 70), 2000), ((5, 3000), 300)])
+def test_the_streamed_preview_is_the_whole_one(tmp_path, shape, max_side):
+    """Made band by band, the picture is the one the whole-array filter made: within one
+    level of 255 (float sums in another order), downscaled, upscaled (a small print: the
+    picture finer than the dots) and a sliver."""
+    from conftest import random_planes
+    h, w = shape
+    planes = random_planes(h, w, density=0.35, seed=h)
+    planes[h // 3: h // 2, :, 2] = 1                          # a yellow bar: edges to keep
+    _write(tmp_path / "p.tif", planes)
+    a = preview_image(tmp_path / "p.tif", max_side=max_side).astype(int)
+    b = _preview_whole(tmp_path / "p.tif", max_side=max_side).astype(int)
+    assert a.shape == b.shape
+    assert np.abs(a - b).max() <= 1 and np.abs(a - b).mean() < 0.01
+
+
+def test_the_preview_of_a_quarter_square_metre_needs_little_memory(tmp_path):
+    """`print --preview` of a 0.25 m2 print (50 x 50 cm: 5,906 x 7,295 dots) grew the
+    process by ~220 MB (every box of the print, then two float copies of them, and all the
+    compressed tiles read at once) against the print's own ~120 MB; now by the picture
+    (12 MB) and a few bands: under 50 MB."""
+    script = f"""
+import resource, numpy as np
+from wideprint.rip.planes import PlanesWriter, preview_image
+w, h = 5906, 7295
+with PlanesWriter({str(tmp_path / 'q.tif')!r}, w, h, {DPI_X}, {DPI_Y}) as out:
+    rng = np.random.default_rng(1)
+    band = (rng.random((64, w, 4)) < 0.3).astype(np.uint8)
+    for y in range(0, h, 64):
+        out.write(band[:min(64, h - y)])
+with PlanesWriter({str(tmp_path / 'small.tif')!r}, 64, 64, {DPI_X}, {DPI_Y}) as out:
+    out.write(np.zeros((64, 64, 4), np.uint8))
+preview_image({str(tmp_path / 'small.tif')!r})      # the kernel loaded: its memory is not the print's
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+img = preview_image({str(tmp_path / 'q.tif')!r})
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(img.shape[0], img.shape[1], base, peak)
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    ph, pw, base, peak = map(int, r.stdout.split())
+    assert max(ph, pw) == 2000
+    assert peak - base < 50_000, (base, peak)
