@@ -22,7 +22,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import tomlkit
@@ -97,19 +97,20 @@ class _Ctx:
 class _Spec:
     kind = ""                      # the type column of the spec table
 
-    def what(self) -> str:         # "a number > 0": the message says "must be <what>"
+    def what(self, plural: bool = False) -> str:   # "a number > 0": the message says "must be <what>"
         raise NotImplementedError
 
     def range(self) -> str:        # the range column of the spec table
         return ""
 
-    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict) -> Any:
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         raise NotImplementedError
 
 
 class _Num(_Spec):
-    def __init__(self, integer: bool = False, *, gt=None, ge=None, le=None,
-                 multiple: int | None = None, choices: tuple | None = None):
+    def __init__(self, integer: bool = False, *, gt: float | None = None, ge: float | None = None,
+                 le: float | None = None, multiple: int | None = None,
+                 choices: tuple[float, ...] | None = None) -> None:
         self.integer, self.gt, self.ge, self.le = integer, gt, ge, le
         self.multiple, self.choices = multiple, choices
         self.kind = "int" if integer else "float"
@@ -138,10 +139,12 @@ class _Num(_Spec):
         return f"{noun} in {r}" if r[0].isdigit() else f"{noun} {r}" if r[0] in "<>" \
             else f"{noun}, {r}"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         ok = isinstance(v, int if self.integer else (int, float)) and not isinstance(v, bool)
-        x = (int(v) if self.integer else float(v)) if ok else None
-        if not ok or not math.isfinite(x) \
+        if not ok:
+            raise at.bad(self, v)
+        x = int(v) if self.integer else float(v)
+        if not math.isfinite(x) \
                 or self.choices and x not in self.choices \
                 or self.gt is not None and not x > self.gt \
                 or self.ge is not None and not x >= self.ge \
@@ -154,7 +157,7 @@ class _Num(_Spec):
 class _Str(_Spec):
     kind = "str"
 
-    def __init__(self, choices: tuple[str, ...] | None = None):
+    def __init__(self, choices: tuple[str, ...] | None = None) -> None:
         self.choices = choices
 
     def range(self) -> str:
@@ -165,7 +168,7 @@ class _Str(_Spec):
             return f"one of {self.range()}"
         return "non-empty strings" if plural else "a non-empty string"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, str) or not v.strip() or self.choices and v not in self.choices:
             raise at.bad(self, v)
         return v
@@ -177,14 +180,14 @@ class _Bool(_Spec):
     def what(self, plural: bool = False) -> str:
         return "true or false"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, bool):
             raise at.bad(self, v)
         return v
 
 
 class _List(_Spec):
-    def __init__(self, item: _Spec, min_len: int = 0, distinct: bool = False):
+    def __init__(self, item: _Spec, min_len: int = 0, distinct: bool = False) -> None:
         self.item, self.min_len, self.distinct = item, min_len, distinct
         self.kind = f"list of {item.kind}"
 
@@ -194,10 +197,10 @@ class _List(_Spec):
                                     "distinct" if self.distinct else "") if p)
         return "; ".join(p for p in (own, r and f"each {r}") if p)
 
-    def what(self) -> str:
+    def what(self, plural: bool = False) -> str:
         return f"a {'non-empty ' if self.min_len else ''}list of {self.item.what(plural=True)}"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, list) or len(v) < self.min_len:
             raise at.bad(self, v)
         out = tuple(self.item.parse(x, at.item(i), ctx, got) for i, x in enumerate(v))
@@ -212,7 +215,7 @@ class _DpiTable(_Spec):
     """{ dpi = value, ... } keyed by the [encoder] dpi modes; `fill` for modes not listed
     (None: every mode must be listed)."""
 
-    def __init__(self, value: _Num, fill=None):
+    def __init__(self, value: _Num, fill: Any = None) -> None:
         self.value, self.fill = value, fill
         self.kind = f"table dpi → {value.kind}"
 
@@ -221,14 +224,14 @@ class _DpiTable(_Spec):
         return (f"each {r}; " if r else "") + ("every dpi mode" if self.fill is None
                                                 else f"modes not listed: {self.fill}")
 
-    def what(self) -> str:
+    def what(self, plural: bool = False) -> str:
         return f"a table {{ dpi = {self.value.what()}, ... }}"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, dict):
             raise at.bad(self, v)
         modes = ctx.encoder.dpi_modes
-        out = {}
+        out: dict[int, Any] = {}
         for key, x in v.items():
             if not (key.isdigit() and int(key) in modes):
                 raise at.sub(key).error(
@@ -242,7 +245,8 @@ class _DpiTable(_Spec):
         return {d: out[d] for d in sorted(out)}
 
 
-def _read_keys(table: dict, at: _At, keys: list[tuple[str, _Spec, Any]], ctx: _Ctx) -> dict:
+def _read_keys(table: dict[str, Any], at: _At, keys: list[tuple[str, _Spec, Any]],
+               ctx: _Ctx) -> dict[str, Any]:
     """Each key of `keys` (name, spec, default or _REQUIRED) parsed from the TOML table;
     an unknown key is an error naming the known ones."""
     names = [k for k, _, _ in keys]
@@ -265,7 +269,8 @@ def _read_keys(table: dict, at: _At, keys: list[tuple[str, _Spec, Any]], ctx: _C
 class _Table(_Spec):
     """An inline table with fixed keys, all required (a head, a dead nozzle)."""
 
-    def __init__(self, keys: list[tuple[str, _Spec]], make):
+    def __init__(self, keys: list[tuple[str, _Spec]],
+                 make: Callable[[dict[str, Any], _At, _Ctx, dict[str, Any]], Any]) -> None:
         self.keys = [(k, s, _REQUIRED) for k, s in keys]
         self.make = make
         self.kind = "{ " + ", ".join(k for k, _ in keys) + " }"
@@ -276,7 +281,7 @@ class _Table(_Spec):
     def range(self) -> str:
         return "; ".join(f"{k}: {s.range()}" for k, s, _ in self.keys if s.range())
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, dict):
             raise at.bad(self, v)
         return self.make(_read_keys(v, at, self.keys, ctx), at, ctx, got)
@@ -288,13 +293,13 @@ class _Curve(_Spec):
     def range(self) -> str:
         return "0..255, in increasing, at least 2 points"
 
-    def what(self) -> str:
+    def what(self, plural: bool = False) -> str:
         return "a list of at least 2 [in, out] points, numbers 0..255, in increasing"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, list) or len(v) < 2:
             raise at.bad(self, v)
-        pts = []
+        pts: list[tuple[Any, ...]] = []
         for i, p in enumerate(v):
             if not (isinstance(p, list) and len(p) == 2):
                 raise at.item(i).error(f"must be an [in, out] pair, not {_show(p)}")
@@ -304,7 +309,7 @@ class _Curve(_Spec):
         return tuple(pts)
 
 
-def _key(spec: _Spec, default: Any = _REQUIRED, doc: str = "", shown: str | None = None):
+def _key(spec: _Spec, default: Any = _REQUIRED, doc: str = "", shown: str | None = None) -> Any:
     """A profile key: its spec, its default as a TOML value (_REQUIRED: none; None: absent
     means `shown`) and what it is, for the spec table."""
     return field(metadata=dict(spec=spec, default=default, doc=doc, shown=shown))
@@ -324,7 +329,7 @@ class Head:
         return COLORS.index(self.color)
 
 
-def _make_dead(v: dict, at: _At, ctx: _Ctx, got: dict) -> tuple[int, int]:
+def _make_dead(v: dict[str, Any], at: _At, ctx: _Ctx, got: dict[str, Any]) -> tuple[int, int]:
     """(head index, nozzle) of a dead nozzle named by head name."""
     index = {h.name: h.index for h in got["heads"]}
     if v["head"] not in index:
@@ -343,12 +348,12 @@ _DEAD = _Table([("head", _Str()), ("nozzle", _Num(True, ge=0))], _make_dead)
 
 
 class _Heads(_List):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(_HEAD, min_len=1)
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         heads = tuple(Head(i, **h) for i, h in enumerate(super().parse(v, at, ctx, got)))
-        seen = set()
+        seen: set[str] = set()
         for h in heads:
             if h.name in seen:
                 raise at.item(h.index).sub("name").error(f"{_show(h.name)} is used by two heads")
@@ -359,21 +364,21 @@ class _Heads(_List):
 class _HeadTable(_Spec):
     """{ HEAD = value, ... } keyed by head names of [layout] heads (read before it)."""
 
-    def __init__(self, value: _Num):
+    def __init__(self, value: _Num) -> None:
         self.value = value
         self.kind = f"table head → {value.kind}"
 
     def range(self) -> str:
         return "keys: head names; heads not listed: 0"
 
-    def what(self) -> str:
+    def what(self, plural: bool = False) -> str:
         return f"a table {{ HEAD = {self.value.what()}, ... }}"
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         if not isinstance(v, dict):
             raise at.bad(self, v)
         names = [h.name for h in got["heads"]]
-        out = {}
+        out: dict[str, Any] = {}
         for key, x in v.items():
             if key not in names:
                 raise at.sub(key).error(f"no head {_show(key)} (heads: {', '.join(names)})")
@@ -382,10 +387,10 @@ class _HeadTable(_Spec):
 
 
 class _DeadNozzles(_List):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(_DEAD)
 
-    def parse(self, v, at, ctx, got):
+    def parse(self, v: Any, at: _At, ctx: _Ctx, got: dict[str, Any]) -> Any:
         return frozenset(super().parse(v, at, ctx, got))
 
 
@@ -712,11 +717,11 @@ SECTIONS: dict[str, type] = {
 }
 
 
-def _keys_of(cls) -> list[tuple[str, _Spec, Any]]:
+def _keys_of(cls: Any) -> list[tuple[str, _Spec, Any]]:
     return [(f.name, f.metadata["spec"], f.metadata["default"]) for f in fields(cls)]
 
 
-def _read_section(name: str, cls, doc: dict, ctx: _Ctx):
+def _read_section(name: str, cls: Any, doc: dict[str, Any], ctx: _Ctx) -> Any:
     at = _At(ctx.path, name)
     keys = _keys_of(cls)
     table = doc.get(name)
@@ -888,7 +893,7 @@ class Profile:
     def usable_slots(self) -> tuple[int, int]:
         """The longest run of slots [first, last+1) that every colour can print with all
         nozzles alive; dead nozzles inside it are the stroke planner's business."""
-        ok = (self.slot_table(include_dead=False)[:, :, 0] >= 0).all(axis=0)
+        ok = np.asarray((self.slot_table(include_dead=False)[:, :, 0] >= 0).all(axis=0))
         best, start = (0, 0), None
         for slot, good in enumerate(list(ok) + [False]):
             if good and start is None:
@@ -989,7 +994,7 @@ def spec_markdown() -> str:
 
 def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | None = None,
                      head_x_counts: dict[str, int] | None = None,
-                     dead_nozzles=None, *, bidir_fine_steps: dict[int, int] | None = None,
+                     dead_nozzles: Any = None, *, bidir_fine_steps: dict[int, int] | None = None,
                      head_x_um: dict[str, float] | None = None,
                      head_y_um: dict[str, float] | None = None,
                      head_y_rows: dict[str, int] | None = None,
@@ -1029,8 +1034,8 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
         for old in [k for k in table if k not in new]:
             del table[old]
         table.update(new)
-    for key, values in (("x_counts", head_x_counts), ("y_rows", head_y_rows)):
-        for name, v in (values or {}).items():
+    for key, per_head in (("x_counts", head_x_counts), ("y_rows", head_y_rows)):
+        for name, v in (per_head or {}).items():
             heads = [h for h in layout.get("heads", []) if h.get("name") == name]
             if len(heads) != 1:
                 raise ProfileError(f"{path}: no head {name!r} to update")
@@ -1067,11 +1072,11 @@ def _um(v: float) -> float:
     return round(float(v), 2)
 
 
-def _dead_nozzle_list(path: Path, entries) -> list[tuple[str, int]]:
+def _dead_nozzle_list(path: Path, entries: Any) -> list[tuple[str, int]]:
     """Checked, de-duplicated and sorted (head order, nozzle) dead nozzles."""
     prof = load_profile(path)
     index = {h.name: h.index for h in prof.heads}
-    out = set()
+    out: set[tuple[str, int]] = set()
     for e in entries:
         head, nozzle = (e["head"], e["nozzle"]) if isinstance(e, dict) else e
         if head not in index:
