@@ -32,7 +32,7 @@ def job_settings(args, profile):
     if not media.icc_path.is_file():
         raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
     mapping = {**media.settings_defaults(), "output_icc": str(media.icc_path), **given}
-    profile = apply_to_profile(media, profile)
+    profile = apply_to_profile(media, profile, int(mapping["dpi"]))
     return profile, from_mapping(mapping, profile)
 
 
@@ -97,7 +97,9 @@ def cmd_create(args) -> int:
     values = mediacal.create(dest, values, profile, patches=args.patches,
                              ink_limit=args.ink_limit, linearise=args.linearise,
                              inject=tuple(args.inject or ()), quality=args.quality,
-                             progress=say)
+                             progress=say, budget=args.drop_budget,
+                             modes=tuple(int(v) for v in args.modes.split(",") if v)
+                             if args.modes else ())
     m = save(Media(dest, check_values(values)))
     if args.json:
         print(json.dumps({"name": name, "folder": str(dest), **m.values["build"]}, indent=2))
@@ -125,7 +127,7 @@ def cmd_verify(args) -> int:
     from .medialib import find
     m = find(args.name)
     r = mediacal.verify(m, _profile(args), count=args.patches, seed=args.seed,
-                        inject=tuple(args.inject or ()), progress=_say(args))
+                        inject=tuple(args.inject or ()), progress=_say(args), dpi=args.dpi)
     if args.json:
         print(json.dumps(r, indent=2))
     else:
@@ -222,6 +224,10 @@ def add_parser(sub) -> None:
     q.add_argument("--no-linearise", dest="linearise", action="store_false",
                    help="keep the raw response (identity curves) as the reference")
     q.add_argument("--quality", default="m", choices=("l", "m", "h"), help="colprof -q")
+    q.add_argument("--drop-budget", type=float, default=1.0, metavar="F",
+                   help="the fraction of each ink amount the media's mode prints (docs/color.md)")
+    q.add_argument("--modes", metavar="DPI,...", help="other dpi modes to linearise to the "
+                   "same colour at the same ink per m2, e.g. 150,600")
     q.add_argument("--description")
     q.add_argument("--dir", help="write the entry under this folder instead of the library")
     q.add_argument("--replace", action="store_true")
@@ -240,6 +246,7 @@ def add_parser(sub) -> None:
                        help="emulator fault, e.g. dot-gain=+8%%")
         q.add_argument("--json", action="store_true")
         if name == "verify":
+            q.add_argument("--dpi", type=int, help="verify in this mode of the entry")
             q.add_argument("--patches", type=int, default=150)
             q.add_argument("--seed", type=int, default=7)
 

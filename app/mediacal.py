@@ -47,6 +47,7 @@ class Printer:
     dither: str = "vced"
     inject: tuple[str, ...] = ()        # emulator faults (--inject), e.g. a drift
     workdir: Path | None = None
+    last_ink_ml_m2: list | None = None  # the last chart's ink per m² of its area, per ink
 
     def _settings(self, **more):
         from ..rip.settings import Placement, RipSettings
@@ -103,7 +104,9 @@ class Printer:
             dev = open_device("emulator", profile, Faults.parse(list(self.inject)),
                               spectro_path=lab_path, spectro_dpi=SPECTRO_DPI)
             try:
-                PrintJob(dev, job).run()
+                rep = PrintJob(dev, job).run()
+                area_m2 = (job.width * 0.0254 / self.dpi) * (job.height * profile.row_um * 1e-6)
+                self.last_ink_ml_m2 = [float(v) / area_m2 for v in rep.ink_ml]
             finally:
                 dev.emulator.close()
                 job.close()
@@ -253,6 +256,42 @@ def stats(de: np.ndarray) -> dict:
 
 
 # -- the loop -----------------------------------------------------------------------------
+def with_budget(profile, dpi: int, budget: float):
+    """The printer profile printing `budget` of each ink amount in this dpi mode."""
+    color = replace(profile.color, drop_budget={**profile.color.drop_budget, dpi: budget})
+    return replace(profile, color=color)
+
+
+def mode_budget(values: dict, dpi: int) -> float:
+    """The budget that lays down the entry's own mode's ink per m² in mode `dpi`."""
+    main = int(values["dpi"])
+    b = float(values["drop_budget"].get(str(main), 1.0)) * main / dpi
+    if b > 1.0 + 1e-9:
+        raise ValueError(f"{dpi} dpi cannot lay down the ink of {main} dpi at budget "
+                         f"{values['drop_budget'].get(str(main), 1.0)}: make the media with "
+                         f"--drop-budget {dpi / main:g} or less")
+    return b
+
+
+def relinearise_modes(values: dict, profile, inject=(), progress: Progress = _quiet,
+                      folder: Path | None = None, suffix: str = "") -> dict:
+    """Each of the entry's other modes: its budget (equal ink per m²) and curves that
+    bring its raw wedge to the entry's reference."""
+    out = {}
+    steps = values["reference"]["steps"]
+    for key in sorted(values["modes"], key=int):
+        dpi = int(key)
+        b = mode_budget(values, dpi)
+        progress(f"    {dpi} dpi: wedge at budget {b:g}")
+        pr = printer_for({**values, "dpi": dpi}, profile, inject)
+        path = (folder or Path(tempfile.gettempdir())) / f"wedge-{dpi}{suffix}.ti3"
+        lab = measure_chart(pr, wedge_values([int(v) for v in steps]),
+                            with_budget(profile, dpi, b), path)
+        out[key] = {"drop_budget": b,
+                    "curves": curves_for(delta_e_from_paper(lab, steps), values["reference"])}
+    return out
+
+
 def printer_for(media_values: dict, profile, inject=(), workdir=None) -> Printer:
     return Printer(profile, dpi=int(media_values["dpi"]), passes=int(media_values["passes"]),
                    bidir=bool(media_values["bidir"]), dither=str(media_values["dither"]),
@@ -261,7 +300,8 @@ def printer_for(media_values: dict, profile, inject=(), workdir=None) -> Printer
 
 def create(folder: Path, values: dict, profile, patches: int = 1000,
            ink_limit: float | None = None, linearise: bool = True, inject=(),
-           quality: str = "m", progress: Progress = _quiet) -> dict:
+           quality: str = "m", progress: Progress = _quiet, budget: float = 1.0,
+           modes: tuple[int, ...] = ()) -> dict:
     """Run the loop and fill `values` (the entry's fields) and `folder` (profile.icc,
     wedge.ti3, tac.ti3, profiling.ti3).  Returns the values."""
     t0 = time.monotonic()
@@ -269,10 +309,16 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
     argyll.tool("targen"), argyll.tool("colprof"), argyll.tool("profcheck")   # fail early
     pr = printer_for(values, profile, inject)
     timings = {}
+    main = int(values["dpi"])
+    values["drop_budget"] = {str(main): float(budget)} if budget != 1.0 else {}
+    values["modes"] = {str(int(d)): {} for d in modes if int(d) != main}
+    for key in values["modes"]:
+        mode_budget(values, int(key))                      # refused before any print
+    raw = with_budget(profile, main, budget)
 
     progress("1/4 linearisation wedge: each ink alone, 0-100 % in 5 % steps")
     t = time.monotonic()
-    lab = measure_chart(pr, wedge_values(), profile, folder / "wedge.ti3")
+    lab = measure_chart(pr, wedge_values(), raw, folder / "wedge.ti3")
     response = delta_e_from_paper(lab)
     reference = linear_reference(response) if linearise else {
         "steps": [float(s) for s in WEDGE_STEPS], **response}
@@ -314,6 +360,10 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
         (folder / "profiling.ti3").write_bytes(stem.with_suffix(".ti3").read_bytes())
     values["icc"] = "profile.icc"
     values["measurements"] = ["wedge.ti3", "tac.ti3", "profiling.ti3"]
+    if values["modes"]:
+        progress("    the other dpi modes: " + ", ".join(values["modes"]))
+        values["modes"] = relinearise_modes(values, profile, inject, progress, folder)
+        values["measurements"] += [f"wedge-{k}.ti3" for k in values["modes"]]
     values["build"] = {"patches": int(len(levels)), "profcheck": check,
                        "seconds": round(time.monotonic() - t0, 1), **timings,
                        "injected": list(inject)}
@@ -323,7 +373,7 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
 
 
 def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
-           progress: Progress = _quiet) -> dict:
+           progress: Progress = _quiet, dpi: int | None = None, keep: dict | None = None) -> dict:
     """Print the independent control chart through the media (relative colorimetric,
     the RIP's own path: sRGB -> the media's profile -> 3-D LUT -> curves), measure it and
     compare with what it aims at: ΔE2000 mean, p95, max against the tolerances."""
@@ -331,9 +381,10 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
     progress(f"control chart: {count} in-gamut colours (seed {seed})")
     rgb, aim = control_chart(media.icc_path, count, seed)
     values = np.concatenate([np.full((1, 3), 255, np.uint8), rgb])   # patch 0: paper
-    pr = printer_for(media.values, profile, inject)
-    progress(f"printing and measuring {len(values)} patches")
-    lab = pr.measure(values, apply_to_profile(media, profile),
+    dpi = int(dpi or media.values["dpi"])
+    pr = printer_for({**media.values, "dpi": dpi}, profile, inject)
+    progress(f"printing and measuring {len(values)} patches at {dpi} dpi")
+    lab = pr.measure(values, apply_to_profile(media, profile, dpi),
                      rgb_icc=str(argyll.REF_DIR / "sRGB.icm"), output_icc=str(media.icc_path),
                      name="verify")
     rel = bradford_relative(lab[1:], lab[0])
@@ -341,7 +392,9 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
     result = stats(de)
     tol = media.values["tolerances"]
     failed = [k for k in ("mean", "p95", "max") if k in tol and result[k] > tol[k]]
-    return {"media": media.name, "version": media.version, "intent": "relative",
+    if keep is not None:              # the raw measurements, for comparing modes
+        keep.update(lab=lab, ink_ml_m2=pr.last_ink_ml_m2)
+    return {"media": media.name, "version": media.version, "intent": "relative", "dpi": dpi,
             **result, "tolerances": tol, "pass": not failed, "failed": failed,
             "seed": seed, "injected": list(inject), "paper_lab": [round(float(v), 2) for v in lab[0]],
             "worst": [{"rgb": [int(v) for v in rgb[i]], "aim": [round(float(v), 2) for v in aim[i]],
@@ -357,11 +410,16 @@ def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet) -
     steps = media.values["reference"]["steps"]
     version = int(media.values["version"]) + 1
     name = f"wedge-v{version}.ti3"
-    lab = measure_chart(pr, wedge_values([int(s) for s in steps]), profile, media.folder / name)
+    raw = with_budget(profile, int(media.values["dpi"]),
+                      float(media.values["drop_budget"].get(str(media.values["dpi"]), 1.0)))
+    lab = measure_chart(pr, wedge_values([int(s) for s in steps]), raw, media.folder / name)
     response = delta_e_from_paper(lab, steps)
     values = dict(media.values)
     values["curves"] = curves_for(response, media.values["reference"])
     values["version"] = version
+    if values["modes"]:
+        values["modes"] = relinearise_modes(values, profile, inject, progress, media.folder,
+                                            f"-v{version}")
     values["measurements"] = [*media.values["measurements"], name]
     shift = {ink: round(float(np.max(np.abs(np.asarray(response[ink]) -
                                             np.asarray(media.values['reference'][ink])))), 2)

@@ -63,6 +63,8 @@ FIELDS: tuple[Field, ...] = (
           "points [in, out] on 0..255, applied after the separation"),
     Field("drop_budget", "table", {}, "dpi mode -> fraction of each ink amount it prints "
           "(docs/color.md); empty: the printer profile's"),
+    Field("modes", "table", {}, "other dpi modes: dpi -> drop_budget and curves, each "
+          "mode linearised to the same reference at the same ink per m2"),
     Field("icc", "str", "profile.icc", "the ICC output profile (in the entry's folder)"),
     Field("measurements", "list", [], "the measurement files it was built from (CGATS "
           ".ti3, in the entry's folder)"),
@@ -249,9 +251,14 @@ def import_(archive: Path, name: str | None = None, replace_existing: bool = Fal
 
 
 # -- applying a media to a job ---------------------------------------------------------------
-def apply_to_profile(media: Media, profile):
-    """The printer profile with the media's ink limit, curves and drop budget."""
+def apply_to_profile(media: Media, profile, dpi: int | None = None):
+    """The printer profile with the media's ink limit, curves and drop budget; for a dpi
+    mode of the entry's `modes`, that mode's curves and budget."""
     from ..rip.profile import CurvesSection
+    mode = media.values["modes"].get(str(dpi)) if dpi is not None else None
+    if mode is not None:
+        media = replace(media, values={**media.values, "curves": mode["curves"],
+                                       "drop_budget": {str(dpi): mode["drop_budget"]}})
     curves = {ink: tuple(tuple(p) for p in pts) for ink, pts in media.curves_255().items()}
     budget = dict(profile.color.drop_budget)
     budget.update({int(k): float(v) for k, v in media.values["drop_budget"].items()})

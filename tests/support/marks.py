@@ -177,6 +177,10 @@ SLOW: dict[str, set[str] | str] = {
         "test_ink_per_m2_is_the_same_in_every_dpi_mode_with_linearisation",  # 0.7
         "test_a_wedge_with_dot_gain_is_measured_and_its_curves_linearise_the_reprint",  # 1.7
     },
+    "test_media.py": {
+        "test_default_media_verifies_drift_fails_and_recalibrate_restores",  # 5.5
+        "test_media_create_runs_the_loop_in_minutes",  # 45
+    },
     "test_load.py": {
         "test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libvips",  # 0.7
         "test_memory_bounded_for_tall_image",  # 8.2
