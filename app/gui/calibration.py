@@ -22,6 +22,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDialog, QDialogBut
 
 from ...rip.planes import read_planes, render_rgb
 from ...rip.profile import Profile, load_profile, save_calibration
+from ...rip.testpatterns import CALIBRATION_KINDS
 from ...rip.testprints import ALIGN_BLOCK, PatternJob, align_offsets, nozzle_check_layout
 from .preview import qimage_from_rgb
 
@@ -38,9 +39,9 @@ PATTERN_NAMES = {
     "feed-scan": "Paper feed, for a scan",
     "wedge-scan": "Step wedge (ink curves), for a scan",
 }
-# the scan patterns -> the `wideprint calibrate` measurement that reads them (app/calibrate.py)
-SCAN_KINDS = {"nozzle-check": "nozzles", "bidir-scan": "bidir", "heads-scan": "heads",
-              "feed-scan": "feed", "wedge-scan": "wedge"}
+# the scan patterns -> the `wideprint calibrate` measurement that reads them (app/calibrate.py;
+# the registry: rip/testpatterns.py)
+SCAN_KINDS = {pattern: kind for kind, pattern in CALIBRATION_KINDS.items()}
 
 
 # -- reading the printed patterns (pure; the tests use them too) ---------------------------
