@@ -17,7 +17,7 @@ import os
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from datetime import datetime
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -596,8 +596,9 @@ class LayoutJob(PrintableJob):
 
     def __init__(self, paths, settings: RipSettings, profile, paper_mm: float | None = None,
                  when: datetime | None = None, names=(), *,
-                 make_job: Callable[..., PrintableJob]):
-        # make_job(path, settings, profile): the job of one item - `RipJob`, handed in by
+                 make_job: Callable[..., Any]):
+        # make_job(path, settings, profile): the job of one item - a `RipJob` (its source is
+        # cropped here, its dead-row compensation left to the sheet), handed in by
         # RipJob itself, so that this module does not import rip/pipeline.py (no circle)
         self.make_job = make_job
         self.paths = [os.fspath(p) for p in paths]

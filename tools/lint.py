@@ -9,6 +9,9 @@ meet when the checks came in is counted per file, ruff's findings and mypy's err
 in tools/lint-baseline.json.  A file may have fewer findings than its count, never more,
 and a file not in the baseline none at all; so the count of the whole tree only goes down.
 When it went down, `--update` writes the lower counts (files at zero leave the baseline).
+The counts are of the working tree: in a checkout where others have uncommitted changes,
+look at what `--update` lowered (git diff) and commit only your files' lines, or a commit
+without their changes could find more than the baseline allows.
 
 The strict modules (pyproject.toml's override: the seams and the public Python API) are
 type-checked with the `--strict` flags; those at zero errors are listed in STRICT_CLEAN
