@@ -460,7 +460,7 @@ def render_rgb(planes: np.ndarray) -> np.ndarray:
     return (out * 255 + 0.5).astype(np.uint8)
 
 
-READ_BUFFER = 4 << 20      # bytes of a planes file read at once (iter_planes)
+READ_BUFFER = 1 << 20      # bytes of a planes file read at once (iter_planes)
 
 
 def iter_planes(path: str | Path):
@@ -472,7 +472,7 @@ def iter_planes(path: str | Path):
             raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {page.shape})")
         h, w = page.shape[:2]
         band, y0, bh = None, None, 0
-        # one tile at a time, read from the file a few MB at a time (tifffile reads up to
+        # one tile at a time, read from the file 1 MB at a time (tifffile reads up to
         # 256 MB of compressed tiles in one go by default: all of a 0.25 m2 media file)
         for seg, idx, _shape in page.segments(maxworkers=1, buffersize=READ_BUFFER):
             y, x = idx[-3], idx[-2]
@@ -673,13 +673,37 @@ def preview_image(planes_path: str | Path, max_side: int = 2000) -> np.ndarray:
     return out
 
 
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """An (h, w, 3) uint8 sRGB picture as a PNG file's bytes: zlib and the "Up" filter, a
+    few hundred rows at a time (no image library: cv2's import alone is ~37 MB of memory)."""
+    import struct
+    import zlib
+    h, w = rgb.shape[:2]
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + \
+            struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    z = zlib.compressobj(6)
+    flat = rgb.reshape(h, w * 3)
+    parts = []
+    for y0 in range(0, h, 256):
+        y1 = min(h, y0 + 256)
+        rows = np.empty((y1 - y0, 1 + w * 3), np.uint8)
+        rows[:, 0] = 2                                      # filter "Up": the row above subtracted
+        rows[:, 1:] = flat[y0:y1]
+        rows[1:, 1:] -= flat[y0:y1 - 1]
+        if y0:
+            rows[0, 1:] -= flat[y0 - 1]
+        parts.append(z.compress(rows.tobytes()))
+    parts.append(z.flush())
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", b"".join(parts)) + chunk(b"IEND", b""))
+
+
 def write_preview(planes_path: str | Path, png_path: str | Path, max_side: int = 2000) -> None:
     """A PNG preview of a planes/media TIFF: true physical aspect, area-averaged, built in
     bands (preview_image)."""
-    import cv2
-    rgb = preview_image(planes_path, max_side)
-    ok, png = cv2.imencode(".png", rgb[:, :, ::-1])
-    if not ok:
-        raise OSError(f"{png_path}: cannot encode the preview")
-    with open(png_path, "wb") as f:     # (Python's open takes any file name; cv2's not)
-        f.write(png.tobytes())
+    png = png_bytes(preview_image(planes_path, max_side))
+    with open(png_path, "wb") as f:
+        f.write(png)

@@ -180,3 +180,15 @@ print(img.shape[0], img.shape[1], base, peak)
     ph, pw, base, peak = map(int, r.stdout.split())
     assert max(ph, pw) == 2000
     assert peak - base < 50_000, (base, peak)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (255, 3), (600, 901)])
+def test_the_png_holds_the_picture_exactly(shape):
+    """write_preview's PNG (zlib and the Up filter, rows in groups of 256: no cv2, whose
+    import alone is ~37 MB) decodes to the very picture."""
+    import cv2
+    from wideprint.rip.planes import png_bytes
+    rgb = np.random.default_rng(shape[0]).integers(0, 256, (*shape, 3), dtype=np.uint8)
+    rgb[: shape[0] // 2, : shape[1] // 2] = (200, 30, 90)
+    back = cv2.imdecode(np.frombuffer(png_bytes(rgb), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert np.array_equal(back[:, :, ::-1], rgb)
