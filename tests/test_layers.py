@@ -100,10 +100,11 @@ def in_folder(folder: str) -> list[str]:
 # job settings schema and the planes/media file format (docs/formats.md); each imports
 # nothing else of wideprint, so whoever imports them imports only them
 NEUTRAL = ("driver.protocol", "rip.profile", "rip.settings", "rip.planes", "rip.compiled",
-           "rip.dotdeflate")
-#: what a seam module may use: the kernels' compiler (rip/compiled.py) and the planes file's
-#: dot coder (rip/dotdeflate.py), leaves themselves
-SEAM_TOOLS = {f"{PKG}.rip.compiled", f"{PKG}.rip.dotdeflate"}
+           "rip.dotdeflate", "rip.parallel")
+#: what a seam module may use: the kernels' compiler (rip/compiled.py), the planes file's
+#: dot coder (rip/dotdeflate.py) and the RIP's thread count (rip/parallel.py, which the
+#: planes writer sizes its deflate threads by), leaves themselves (each is in NEUTRAL)
+SEAM_TOOLS = {f"{PKG}.rip.compiled", f"{PKG}.rip.dotdeflate", f"{PKG}.rip.parallel"}
 
 
 def test_the_import_parser_sees_relative_and_lazy_imports():
