@@ -113,7 +113,7 @@ class PrintServer:
                              f"{self.state_dir}") from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
-        self._lock_fd = fd
+        self._lock_fd: int | None = fd
 
     def _own_profile(self, name: str) -> Path:
         """A printer configured without a profile gets its own in the state directory
@@ -507,7 +507,7 @@ class PrintServer:
     def estop(self) -> list[str]:
         """Emergency stop: every printer that is printing stops at once (its job is held
         with the ESTOP fault until cleared); the others are paused."""
-        stopped = []
+        stopped: list[str] = []
         for name, w in self.workers.items():
             job = w.job
             if job is not None:

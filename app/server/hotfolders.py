@@ -38,7 +38,7 @@ class NotAFolder(OSError):
     """A path below the root that should be a real folder is a link or something else."""
 
 
-def _pct(err: UnicodeError):
+def _pct(err: UnicodeDecodeError | UnicodeEncodeError) -> tuple[str, int]:
     bad = err.object[err.start:err.end]
     if isinstance(bad, str):                       # surrogateescape'd bytes
         bad = bad.encode("utf-8", "surrogateescape")
