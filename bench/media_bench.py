@@ -29,7 +29,6 @@ def compare_modes(media, profile) -> dict:
     """The control chart through the media at 150, 300 and 600 dpi: each mode's verify,
     the ΔE2000 between the modes' prints and their ink per m² (the emulator's drops)."""
     import itertools
-    import numpy as np
     from wideprint.app import mediacal
     from wideprint.device_sim.spectral import delta_e2000
     kept, out = {}, {}
