@@ -177,6 +177,8 @@ class ApiHandler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
     default_request_version = "HTTP/1.0"             # errors always carry a status line
     srv: ApiHost                                     # set on the subclass (core.py)
+    server: _HTTPServer                              # socketserver's: the users, the owners
+    who: Identity                                    # the request's, set first by _dispatch
 
     # -- connection and request head ------------------------------------------------------------
     def setup(self) -> None:
@@ -513,11 +515,12 @@ class ApiHandler(BaseHTTPRequestHandler):
     def _dispatch(self, method: str) -> None:
         url = urlsplit(self.path)
         parts = [p for p in url.path.split("/") if p]
-        self.who = self._identity()
-        if self.who is None:
+        who = self._identity()
+        if who is None:
             # nothing of an unauthorised request is read; the connection is closed
             return self._error(401, "missing or wrong bearer token (see the token file in "
                                "the server's state directory, or your user token)", close=True)
+        self.who = who
         claimed = self.headers.get_all("X-Wideprint-User") or []
         if claimed:
             try:
