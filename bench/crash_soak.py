@@ -6,8 +6,8 @@ and on while the server is down; an operator releases the jobs held because a pr
 could not confirm its sheet.  At the end every job must be done exactly once, its media
 equal to its planes, each copy accounted done once.
 
-    python bench/crash_soak.py [--seconds 120] [--clients 3] [--jobs 6] [--seed 1]
-                               [--json OUT.json]
+    python bench/crash_soak.py [--seconds 120] [--clients 3] [--jobs N] [--seed 1]
+                               [--json OUT.json] [--keep DIR]
 
 Exit 0 when every check held.  Results kept as data: bench/results/crash_soak.json.
 """
@@ -88,6 +88,7 @@ class Soak:
         self.submitted: dict[str, dict] = {}          # key -> {planes, copies, job}
         self.stats = dict(kills=0, power_cycles=0, releases=0, submit_retries=0)
         self.stop = threading.Event()
+        self.killing_done = threading.Event()
 
     # -- the server ----------------------------------------------------------------------
     def start_server(self):
@@ -122,9 +123,9 @@ class Soak:
         folder = self.work / f"client-{index}"
         folder.mkdir()
         for k in range(self.n_jobs):
-            if self.stop.is_set():
-                return
-            planes = random_planes(rng.randrange(120, 360), rng.randrange(80, 260),
+            if self.stop.is_set() or self.killing_done.is_set():
+                return                            # submissions go on while the kills do
+            planes = random_planes(rng.randrange(200, 700), rng.randrange(80, 260),
                                    seed=rng.randrange(1 << 30))
             src = write_cmyk_tiff(folder / f"job-{k}.tif", planes)
             key = f"soak-{index}-{k}"
@@ -158,12 +159,20 @@ class Soak:
                 pass
             time.sleep(0.5)
 
+    def printing(self) -> list[str]:
+        """The printers printing now (a power cycle there leaves a sheet half printed)."""
+        try:
+            return sorted(p["name"] for p in self.client().printers() if p["state"] == "printing")
+        except Exception:  # noqa: BLE001 - the server may be starting
+            return []
+
     def killer(self, until: float):
         while time.monotonic() < until:
             time.sleep(self.rng.uniform(2.0, 5.0))
+            busy = self.printing()
             self.kill_server()
             if self.rng.random() < 0.25:                  # a printer switched off and on
-                name = self.rng.choice(sorted(self.emus))
+                name = self.rng.choice(busy or sorted(self.emus))
                 self.emus[name].kill()
                 self.emus[name].start()
                 self.stats["power_cycles"] += 1
@@ -180,6 +189,7 @@ class Soak:
         for t in threads:
             t.start()
         self.killer(t0 + self.seconds)
+        self.killing_done.set()
         for t in threads[:-1]:
             t.join()
         # the end: no more kills; every job must finish
@@ -230,7 +240,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=120)
     ap.add_argument("--clients", type=int, default=3)
-    ap.add_argument("--jobs", type=int, default=6, help="jobs per client")
+    ap.add_argument("--jobs", type=int, default=1000,
+                    help="at most this many jobs per client (each submits until the kills end)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", metavar="OUT.json")
     ap.add_argument("--keep", metavar="DIR", help="work in DIR and keep it (logs, media)")
