@@ -269,6 +269,7 @@ def test_hold_release_priority_move_and_cancel_logged_as_cancel(qtbot, win, serv
     win.tabs.setCurrentIndex(1)
     win.history_view.select_ids([job_named(win, "q1.tif")["id"]])
     win._update_actions()
+    win.confirm = lambda *a: True      # it asks (tests/test_gui_operator.py answers the box)
     win.actions_["requeue"].trigger()
     qtbot.waitUntil(lambda: "q1.tif" in names_in(win.queue_view), timeout=10_000)
 

@@ -25,6 +25,7 @@ from ...rip.profile import Profile, load_profile, save_calibration
 from ...rip.testpatterns import CALIBRATION_KINDS
 from ...rip.testprints import ALIGN_BLOCK, PatternJob, align_offsets, nozzle_check_layout
 from .preview import qimage_from_rgb
+from .wheel_guard import guard_wheel
 
 log = logging.getLogger("wideprint.gui")
 
@@ -356,6 +357,11 @@ class CalibrationDialog(QDialog):
         self.pattern.setCurrentIndex(max(0, self.pattern.findData(s.get("pattern", "nozzle-check"))))
         self._pattern_changed()
         self.resize(860, 640)
+        guard_wheel(self)
+
+    def showEvent(self, ev) -> None:              # noqa: N802 - Qt's name
+        guard_wheel(self)                         # fields made since (a pattern's choices)
+        super().showEvent(ev)
 
     # -- calibration from a scan -------------------------------------------------------------
     def _choose_scan(self) -> None:

@@ -58,6 +58,7 @@ class GuiSettings:
     geometry: str = ""                               # base64 QMainWindow geometry
     splitter: str = ""
     calibration: dict = field(default_factory=dict)  # last pattern, dpi, width
+    add_held: bool = False                           # Add files: as held (look, then Release)
 
     @classmethod
     def load(cls, path: Path) -> "GuiSettings":

@@ -163,7 +163,8 @@ class ProgressDelegate(QStyledItemDelegate):
         opt.progress = int(round(float(value) * 1000))
         opt.text = f"{float(value) * 100:.0f} %"
         opt.textVisible = True
-        opt.state = option.state | QStyle.State_Enabled
+        # State_Horizontal: without it Qt 6 draws a vertical bar (filling bottom-up)
+        opt.state = option.state | QStyle.State_Enabled | QStyle.State_Horizontal
         style = option.widget.style() if option.widget else QApplication.style()
         style.drawControl(QStyle.CE_ProgressBar, opt, painter)
 

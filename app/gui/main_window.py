@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from PySide6.QtCore import QByteArray, QTimer, Qt
 from PySide6.QtGui import QAction, QImage, QKeySequence
-from PySide6.QtWidgets import (QComboBox, QFileDialog, QGridLayout, QGroupBox, QLabel,
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QGridLayout, QGroupBox, QLabel,
                                QMainWindow, QMenu, QMessageBox, QScrollArea, QSizePolicy, QSplitter, QStyle,
                                QTabWidget, QToolButton, QVBoxLayout, QWidget)
 
@@ -25,12 +25,13 @@ from ... import __version__
 from ..estimate import fmt_duration, fmt_ml
 from ..safe_text import safe
 from .config import GuiSettings, SETTINGS_FILE, default_config_dir
-from .jobs_view import JobsModel, JobsView
+from .jobs_view import JobsModel, JobsView, state_text
 from .logview import LogView
 from .messages import plain_message, short_paths
 from .preview import PreviewPanel
 from .printers_panel import PrintersPanel
 from .server_link import ServerLink
+from .wheel_guard import guard_wheel
 from .settings_form import SettingsForm, apply_edit, settings_patch
 
 log = logging.getLogger("wideprint.gui")
@@ -159,9 +160,14 @@ class MainWindow(QMainWindow):
         self._ended_logged: set[int] = set()
         self.calibration = None
 
+        self._faults: dict[str, str] = {}          # printer -> its fault, as logged
+        self._fitted = False
+        self._select_new: set[int] = set()          # jobs just added: selected when they show
         self._build_actions()
         self._build_ui()
+        self._build_menus()
         self._restore()
+        guard_wheel(self)
         self.logview.install()
         self.setAcceptDrops(True)
 
@@ -218,7 +224,28 @@ class MainWindow(QMainWindow):
         self._action("resume_all", "Resume all", lambda: self._queue_paused(False), None, S.SP_MediaPlay)
         self._action("estop", "EMERGENCY STOP", self.emergency_stop, "Ctrl+Shift+Space",
                      S.SP_BrowserStop, "Stop every printer at once")
-        self._action("quit", "Quit", self.close, QKeySequence.Quit)
+        self._action("quit", "&Quit", self.close, "Ctrl+Q", None, "Close the window (the server "
+                     "goes on printing the jobs waiting)")
+
+    def _build_menus(self) -> None:
+        """The menu bar (the actions' shortcuts work from it, Ctrl+Q among them)."""
+        mb = self.menuBar()
+        mb.setObjectName("menu_bar")
+        a = self.actions_
+        for title, keys in (("&File", ("add", None, "quit")),
+                            ("&Jobs", ("hold", "release", "cancel", "requeue", None, "up", "down")),
+                            ("&Printers", ("pause_all", "resume_all", None, "estop"))):
+            m = mb.addMenu(title)
+            m.setObjectName(f"menu_{title.strip('&').lower()}")
+            for k in keys:
+                if k is None:
+                    m.addSeparator()
+                else:
+                    m.addAction(a[k])
+            if title == "&Jobs":
+                m.addSeparator()
+                self.move_menu_bar = m.addMenu("Move to")
+                self.move_menu_bar.setObjectName("menu_move")
 
     def _build_ui(self) -> None:
         tb = self.addToolBar("Main")
@@ -231,6 +258,13 @@ class MainWindow(QMainWindow):
         self.target.setToolTip("The printer new jobs go to (any: the first free one that fits)")
         self.target.addItem("any printer", None)
         tb.addWidget(self.target)
+        self.add_held = QCheckBox("as held")
+        self.add_held.setObjectName("add_held")
+        self.add_held.setToolTip("New jobs wait, held, until released: look at the preview and "
+                                 "the estimate first (remembered)")
+        self.add_held.setChecked(self.gs.add_held)
+        self.add_held.toggled.connect(self._add_held_toggled)
+        tb.addWidget(self.add_held)
         tb.addSeparator()
         for k in ("hold", "release", "cancel", "requeue"):
             tb.addAction(self.actions_[k])
@@ -322,7 +356,9 @@ class MainWindow(QMainWindow):
         if self.gs.geometry:
             self.restoreGeometry(QByteArray.fromBase64(self.gs.geometry.encode()))
         else:
-            self.resize(1366, 768)
+            avail = self._available()
+            # 1366 x 768 at most, less a title bar's worth until the frame is known (showEvent)
+            self.resize(min(1366, avail.width()), min(768, avail.height() - 32))
         if self.gs.splitter:
             self.split.restoreState(QByteArray.fromBase64(self.gs.splitter.encode()))
         else:
@@ -342,8 +378,52 @@ class MainWindow(QMainWindow):
         log.error("%s", message)
         self.statusBar().showMessage(short_paths(message), 10000)
 
+    def _available(self):
+        from PySide6.QtWidgets import QApplication
+        screen = self.screen() or QApplication.primaryScreen()
+        return screen.availableGeometry()
+
+    def showEvent(self, ev) -> None:              # noqa: N802 - Qt's name
+        super().showEvent(ev)
+        if not self._fitted:
+            self._fitted = True
+            self.fit_screen()
+
+    def fit_screen(self) -> None:
+        """The whole window (frame and title bar too) inside the screen's available area
+        (a 1366 x 768 screen less its task bar): smaller, and moved in, when it is not."""
+        avail = self._available()
+        frame, inner = self.frameGeometry(), self.geometry()
+        extra_w, extra_h = frame.width() - inner.width(), frame.height() - inner.height()
+        w = min(inner.width(), avail.width() - extra_w)
+        h = min(inner.height(), avail.height() - extra_h)
+        if (w, h) != (inner.width(), inner.height()):
+            self.resize(max(w, self.minimumSizeHint().width()), max(h, self.minimumSizeHint().height()))
+        frame = self.frameGeometry()
+        x = max(avail.left(), min(frame.left(), avail.right() + 1 - frame.width()))
+        y = max(avail.top(), min(frame.top(), avail.bottom() + 1 - frame.height()))
+        if (x, y) != (frame.left(), frame.top()):
+            self.move(x, y)
+
+    def _log_faults(self, printers: list) -> None:
+        """A printer's fault into the log when it appears (a WARNING with the advice), and
+        when it is cleared."""
+        for p in printers:
+            name, fault = p["name"], p.get("fault") or ""
+            was = self._faults.get(name, "")
+            if fault == was:
+                continue
+            self._faults[name] = fault
+            if fault:
+                advice = plain_message(fault)
+                log.warning("printer %s: fault: %s%s", name, safe(short_paths(fault)),
+                            f" — {advice}" if advice else "")
+            else:
+                log.info("printer %s: fault cleared", name)
+
     def _printers_changed(self, printers: list) -> None:
         self.printers = printers
+        self._log_faults(printers)
         self.printers_panel.show_printers(printers)
         names = [p["name"] for p in printers]
         have = [self.target.itemData(i) for i in range(1, self.target.count())]
@@ -354,9 +434,10 @@ class MainWindow(QMainWindow):
             for n in names:
                 self.target.addItem(n, n)
             self.target.setCurrentIndex(max(0, self.target.findData(cur)))
-            self.move_menu.clear()
-            for n in [None] + names:
-                self.move_menu.addAction(n or "any printer", lambda _n=n: self._move(_n))
+            for menu in (self.move_menu, self.move_menu_bar):
+                menu.clear()
+                for n in [None] + names:
+                    menu.addAction(n or "any printer", lambda _n=n: self._move(_n))
         if printers and self.preview is not None:
             self._media_from(printers[0])
         for p in printers:
@@ -402,6 +483,7 @@ class MainWindow(QMainWindow):
         if keep:
             self.queue_view.select_ids(keep)
         self._want_thumbs(jobs)
+        self._select_added()
         gone = before - {j["id"] for j in jobs}
         if gone:
             self.refresh_history(log_ended=gone)
@@ -540,35 +622,108 @@ class MainWindow(QMainWindow):
             self.gs.last_dir = str(Path(paths[0]).parent)
             self.add_files(paths)
 
+    def _add_held_toggled(self, on: bool) -> None:
+        self.gs.add_held = bool(on)
+        self._save_timer.start()
+
     def add_files(self, paths) -> None:
         """Each file (or the files of a folder) uploaded to the server as a job with the
-        settings for new jobs."""
+        settings for new jobs, held when "as held" is ticked; one after the other in the
+        order given (the queue's order), and the new jobs selected when they show."""
         files = []
         for p in map(Path, paths):
             files.extend(sorted(x for x in p.iterdir() if x.is_file() and not x.name.startswith("."))
                          if p.is_dir() else [p])
+        if not files:
+            return
         printer = self.target.currentData()
-        for f in files:
-            desc = dict(settings=dict(self.gs.job), copies=self.gs.copies, printer=printer,
-                        client="gui", key=f"gui-{uuid.uuid4()}")
+        held = self.add_held.isChecked()
+        descs = [dict(settings=dict(self.gs.job), copies=self.gs.copies, printer=printer,
+                      hold=True if held else None, client="gui", key=f"gui-{uuid.uuid4()}")
+                 for _ in files]
 
-            def done(r, _f=f):
-                log.info("job %s: %s queued%s", r["job"]["id"], _f.name,
+        def upload(c):
+            out = []
+            for f, d in zip(files, descs):
+                try:
+                    out.append((f, c.submit(f, **d)["job"], None))
+                except Exception as exc:  # noqa: BLE001 - named per file; the others go on
+                    out.append((f, None, str(exc)))
+            return out
+
+        def done(results):
+            ids = []
+            for f, job, err in results:
+                if job is None:
+                    log.error("%s: %s", f.name, short_paths(err))
+                    self.statusBar().showMessage(f"{f.name}: {short_paths(err)}", 15000)
+                    continue
+                ids.append(job["id"])
+                log.info("job %s: %s queued%s%s", job["id"], f.name, " held" if held else "",
                          f" for printer {printer}" if printer else "")
+            self._select_new = set(ids)
+            self._select_added()
+        self.link.call(upload, done)
 
-            def failed(msg, _f=f):
-                log.error("%s: %s", _f.name, short_paths(msg))
-                self.statusBar().showMessage(f"{_f.name}: {short_paths(msg)}", 15000)
-            self.link.call(lambda c, _f=f, _d=desc: c.submit(_f, **_d), done, failed)
+    def _select_added(self) -> None:
+        """The jobs just added, selected in the Queue once they are in it."""
+        if not self._select_new:
+            return
+        present = {j["id"] for j in self.active}
+        if not self._select_new <= present:
+            return
+        ids, self._select_new = sorted(self._select_new), set()
+        self.tabs.setCurrentIndex(0)
+        self.queue_view.select_ids(ids)
+        r = self.queue_model.row_of(ids[0])
+        if r >= 0:
+            self.queue_view.scrollTo(self.queue_model.index(r, 0))
+
+    def confirm(self, title: str, text: str, detail: str = "") -> bool:
+        """Ask before a destructive action (a modal Yes/No box, No the default)."""
+        box = QMessageBox(QMessageBox.Warning, title, text, QMessageBox.Yes | QMessageBox.No, self)
+        box.setObjectName("confirm_box")
+        box.setDefaultButton(QMessageBox.No)
+        box.setEscapeButton(QMessageBox.No)
+        if detail:
+            box.setInformativeText(detail)
+        return box.exec() == QMessageBox.Yes
+
+    @staticmethod
+    def _started(j: dict) -> bool:
+        """A job printing, or stopped part-way (a fault, an interrupted print, copies done)."""
+        return (j["state"] == "printing" or bool(j.get("interrupted")) or bool(j.get("fault"))
+                or bool(j.get("strokes_done")) or bool(j.get("copies_done")))
+
+    @staticmethod
+    def _names(jobs: list[dict]) -> str:
+        shown = [f"job {j['id']} {safe(j['name'])} ({state_text(j)})" for j in jobs[:6]]
+        return "\n".join(shown + ([f"and {len(jobs) - 6} more"] if len(jobs) > 6 else []))
 
     def _each(self, what: str) -> None:
-        for j in self.selected_jobs():
+        jobs = self.selected_jobs()
+        if what == "requeue":
+            jobs = [j for j in jobs if j["state"] in ("failed", "cancelled")]
+            if not jobs or not self.confirm(
+                    "Requeue", f"Print {'this job' if len(jobs) == 1 else f'these {len(jobs)} jobs'} "
+                    f"again, from the first stroke?\n\n{self._names(jobs)}",
+                    "It uses media and ink again."):
+                return
+        for j in jobs:
             self.link.call(lambda c, _id=j["id"]: c.action(_id, what),
                            lambda job, _w=what: log.info("job %s: %s", job["id"], _w))
 
     def cancel_selected(self) -> None:
         jobs = [j for j in self.selected_jobs() if j["state"] in ("queued", "held", "printing")]
         if not jobs:
+            return
+        started = [j for j in jobs if self._started(j)]
+        if started and not self.confirm(
+                "Cancel", f"Cancel {'this job' if len(jobs) == 1 else f'these {len(jobs)} jobs'}?"
+                f"\n\n{self._names(jobs)}",
+                f"{len(started)} of them printing or printed part-way: the print stops and what "
+                "was printed is waste." if len(jobs) > 1 else
+                "It is printing or printed part-way: the print stops and what was printed is waste."):
             return
         for j in jobs:
             self.link.call(lambda c, _id=j["id"]: c.action(_id, "cancel"))
@@ -581,7 +736,14 @@ class MainWindow(QMainWindow):
                 self.link.call(lambda c, _id=j["id"], _p=pr: c.edit(_id, priority=_p))
 
     def _move(self, printer) -> None:
-        for j in self.selected_jobs():
+        jobs = self.selected_jobs()
+        started = [j for j in jobs if self._started(j)]
+        if started and not self.confirm(
+                "Move", f"Move {'this job' if len(jobs) == 1 else f'these {len(jobs)} jobs'} to "
+                f"{printer or 'any printer'}?\n\n{self._names(jobs)}",
+                "Printed part-way: on another printer it prints again from its first stroke."):
+            return
+        for j in jobs:
             self.link.call(lambda c, _id=j["id"]: c.move(_id, printer),
                            lambda job: log.info("job %s: printer %s", job["id"], job["printer"] or "any"))
 
@@ -598,10 +760,27 @@ class MainWindow(QMainWindow):
         if what == "test-prints":
             return self.open_calibration(printer)
         detail = f" ({body.get('then') or body.get('action')})" if body else ""
-        self.link.call(lambda c: c.printer_action(printer, what, body),
-                       lambda r: log.info("printer %s: %s%s%s", printer, what, detail,
-                                          f": {r['message']}" if isinstance(r, dict) and
-                                          r.get("message") else ""), ordered=True)
+        card = self.printers_panel.cards.get(printer)
+        if what == "head-care" and card is not None:
+            doing = {"spit": "spitting all heads", "purge": "purging and wiping all heads",
+                     "cap": "parking and capping", "uncap": "uncapping"}.get(
+                         (body or {}).get("action"), "head care")
+            card.set_busy(f"Head care: {doing}…")
+            self.statusBar().showMessage(f"printer {printer}: head care: {doing}…")
+
+        def done(r):
+            if card is not None and what == "head-care":
+                card.set_busy(None)
+                self.statusBar().showMessage(f"printer {printer}: head care done", 5000)
+            log.info("printer %s: %s%s%s", printer, what, detail,
+                     f": {r['message']}" if isinstance(r, dict) and r.get("message") else "")
+
+        def failed(msg):
+            if card is not None and what == "head-care":
+                card.set_busy(None)
+                self.statusBar().clearMessage()
+            self._request_failed(msg)
+        self.link.call(lambda c: c.printer_action(printer, what, body), done, failed, ordered=True)
 
     def _update_actions(self) -> None:
         jobs = self.selected_jobs()
@@ -615,6 +794,7 @@ class MainWindow(QMainWindow):
         a["up"].setEnabled(waiting)
         a["down"].setEnabled(waiting)
         self.move_btn.setEnabled(waiting)
+        self.move_menu_bar.setEnabled(waiting)
 
     # ======================================================================================
     # test prints and calibration (printed by the server on the chosen printer)

@@ -65,7 +65,7 @@ class PrinterCard(QFrame):
         self.media.setToolTip("the media as it lands (emulated printer)")
         g.addWidget(self.media, 0, 3, 5, 1)
         self.media_version = None
-        self.fault = _fixed_lines(QLabel(""), 2)
+        self.fault = _fixed_lines(QLabel(""), 3)      # the fault and its advice, whole at 1366 px
         self.fault.setObjectName("printer_fault")
         self.fault.setStyleSheet("color: #c62828;")
         g.addWidget(self.fault, 3, 0, 1, 3)
@@ -101,6 +101,20 @@ class PrinterCard(QFrame):
         row.addWidget(self.clear)
         row.addWidget(self.tests)
         row.addWidget(self.care)
+        # head care (or another printer request) running: a busy bar and what runs, in the
+        # button row (its height does not change: nothing moves when it shows)
+        self.busy = QProgressBar()
+        self.busy.setObjectName("printer_busy")
+        self.busy.setRange(0, 0)
+        self.busy.setTextVisible(False)
+        self.busy.setFixedSize(48, 10)
+        self.busy_text = QLabel("")
+        self.busy_text.setObjectName("printer_busy_text")
+        self.busy_text.setStyleSheet("color: #1565c0;")
+        self.busy.hide()
+        self.busy_text.hide()
+        row.addWidget(self.busy)
+        row.addWidget(self.busy_text)
         row.addStretch(1)
         g.addLayout(row, 4, 0, 1, 3)
         g.setColumnStretch(1, 1)
@@ -114,11 +128,23 @@ class PrinterCard(QFrame):
                 self.media.width() - 2, self.media.height() - 2, Qt.KeepAspectRatio,
                 Qt.SmoothTransformation))
 
+    def set_busy(self, text: str | None) -> None:
+        """`text`: what the printer does at the operator's request (head care), shown with a
+        busy bar until it answers; None: done."""
+        on = bool(text)
+        self.busy.setVisible(on)
+        self.busy_text.setVisible(on)
+        self.busy_text.setText(text or "")
+        self.busy_text.setToolTip(text or "")
+        self.info["_busy"] = on
+        self.care.setEnabled(not on and not self.info.get("fault") and not self.info.get("current"))
+
     def _pause_clicked(self) -> None:
         self.action.emit(self.name, "resume" if self.info.get("paused") else "pause", None)
 
     def show_info(self, p: dict) -> None:
-        self.info = p
+        busy = self.info.get("_busy", False)
+        self.info = dict(p, _busy=busy)
         self.title.setText(f"<b>{self.name}</b> <span style='color:#666'>{p.get('device', '')}</span>")
         self.title.setToolTip(f"device {p.get('device')}\nprofile {p.get('profile')}")
         fault = p.get("fault") or ""
@@ -186,7 +212,7 @@ class PrinterCard(QFrame):
         self.pause.setEnabled(not fault)
         self.clear.setEnabled(bool(fault))
         self.tests.setEnabled(not fault and not cur)
-        self.care.setEnabled(not fault and not cur)
+        self.care.setEnabled(not fault and not cur and not busy)
 
 
 class PrintersPanel(QScrollArea):
