@@ -30,6 +30,7 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
@@ -41,11 +42,11 @@ OPTIONS = dict(cache=True, nogil=True)
 KERNELS: dict[str, "Kernel"] = {}
 
 
-def kernel(inline: str | None = None, variant: str | None = None):
+def kernel(inline: str | None = None, variant: str | None = None) -> Callable[[Callable[..., Any]], Kernel]:
     """`@kernel()` for `@njit(cache=True, nogil=True)`, `@kernel(inline="always")` for a
     helper only other kernels call.  `variant` tells apart the kernels a factory makes from
     one function with different closure constants (rip/halftone.py's 5x3 diffusions)."""
-    def wrap(fn):
+    def wrap(fn: Callable[..., Any]) -> Kernel:
         return Kernel(fn, inline=inline, variant=variant)
     return wrap
 

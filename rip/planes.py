@@ -26,6 +26,7 @@ import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any, Callable, Iterator, cast
 
 import numpy as np
 import tifffile
@@ -59,7 +60,7 @@ def _spread_table() -> np.ndarray:
 _SPREAD = _spread_table()
 
 
-def _deflate(quick: bool = False):
+def _deflate(quick: bool = False) -> Callable[[Any], bytes]:
     """A deflate (zlib stream) encoder for the file's tiles and strips: ISA-L's level 1
     (python-isal; it releases the GIL).  Measured on a print's media, one core: a 256 KB
     8-bit tile of 0/1 samples 0.55 ms to 13 % of its size, against zlib-ng's `deflate_quick`
@@ -70,7 +71,7 @@ def _deflate(quick: bool = False):
     try:
         from isal import isal_zlib
 
-        def isal(data):
+        def isal(data: Any) -> bytes:
             if isinstance(data, np.ndarray) and not data.flags.c_contiguous:
                 data = np.ascontiguousarray(data)       # it takes contiguous buffers only
             return isal_zlib.compress(data, 1)
@@ -80,8 +81,8 @@ def _deflate(quick: bool = False):
     try:
         import imagecodecs
         if quick and imagecodecs.ZLIBNG.available:
-            return lambda data: imagecodecs.zlibng_encode(data, level=1)
-        return lambda data: imagecodecs.deflate_encode(data, level=DEFLATE_LEVEL)
+            return lambda data: imagecodecs.zlibng_encode(data, level=1)  # type: ignore[return-value]
+        return lambda data: imagecodecs.deflate_encode(data, level=DEFLATE_LEVEL)  # type: ignore[return-value]
     except ImportError:            # pragma: no cover - imagecodecs is a dependency
         import zlib
         return lambda data: zlib.compress(data, DEFLATE_LEVEL)
@@ -119,7 +120,7 @@ def _ascii(text: str) -> str:
 
 
 @kernel()
-def _nibble_rows(bits, spread, out):
+def _nibble_rows(bits: np.ndarray, spread: np.ndarray, out: np.ndarray) -> None:
     """bits (h, 4, wb) -> out (h, n) bytes of the packed encoding, n <= 4 wb: the 8 dots of
     plane byte xb are the 4 bytes from 4 xb, dot 0 in the high nibble (big-endian order).
     A compiled loop: numpy's four table look-ups over the band took ~9x as long (1.0 ms
@@ -167,7 +168,7 @@ class PlanesWriter:
         description = _ascii(description)      # a TIFF string is 7-bit ASCII; file names are not
         self.dots = np.zeros(4, np.int64)
         self._kind: str | None = None           # "dots" or "bits": what write*() was given
-        self._pending: list[np.ndarray] = []
+        self._pending: list[tuple[str, np.ndarray]] = []     # (kind, rows)
         self._pending_rows = 0
         self._rows = 0
         workers = workers or WORKERS            # the RIP's count (rip/parallel.py)
@@ -175,7 +176,7 @@ class PlanesWriter:
         self._blank: bytes | None = None        # a deflated tile of blank paper
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="planes-deflate")
         # futures of encoded bands in file order; bounded: memory is a few bands
-        self._q: queue.Queue = queue.Queue(maxsize=workers + 1)
+        self._q: queue.Queue[Any] = queue.Queue(maxsize=workers + 1)
         self._error: BaseException | None = None
         self._opened = False
         self._thread = threading.Thread(target=self._run, args=(dpi_x, dpi_y, description),
@@ -183,7 +184,7 @@ class PlanesWriter:
         self._thread.start()
 
     # -- the file (writer thread) ---------------------------------------------------------
-    def _segments(self):
+    def _segments(self) -> Iterator[bytes]:
         while True:
             item = self._q.get()
             if item is None:
@@ -194,7 +195,7 @@ class PlanesWriter:
             self.dots += dots
             yield from segments
 
-    def _run(self, dpi_x, dpi_y, description):
+    def _run(self, dpi_x: float, dpi_y: float, description: str) -> None:
         layout = dict(rowsperstrip=STRIP_ROWS) if self.packed else dict(tile=TILE)
         try:
             with open(self.path, "wb") as fh:
@@ -282,13 +283,13 @@ class PlanesWriter:
                 if self.packed:
                     raise ValueError(f"the packed planes format holds 0 or 1 drop per dot, "
                                      f"not {int(rows.max())}")
-                rows = ("dots", rows.copy())
+                item = ("dots", rows.copy())
             else:
-                rows = ("nibbles", np.packbits(rows.reshape(rows.shape[0], -1), axis=1))
+                item = ("nibbles", np.packbits(rows.reshape(rows.shape[0], -1), axis=1))
         else:
-            rows = (kind, rows)
-        self._pending.append(rows)
-        self._pending_rows += rows[1].shape[0]
+            item = (kind, rows)
+        self._pending.append(item)
+        self._pending_rows += item[1].shape[0]
         seg = self.rows_per_segment
         while self._pending_rows >= seg or (self._rows == self.height and self._pending_rows):
             self._flush_band()
@@ -349,10 +350,11 @@ class PlanesWriter:
             if self._opened and stat.S_ISREG(os.stat(self.path).st_mode):
                 os.unlink(self.path)
 
-    def __enter__(self):
+    def __enter__(self) -> PlanesWriter:
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: Any) -> None:
         if exc_type is None:
             self.close()
         else:
@@ -360,7 +362,7 @@ class PlanesWriter:
 
 
 @contextlib.contextmanager
-def output_file(path: str | Path):
+def output_file(path: str | Path) -> Iterator[str]:
     """Yield a temporary name to write `path` under: in its folder, renamed to `path` when
     the block succeeds and removed when it fails, so `path` is never left half written.
     Any other target - a symlink (a rename would replace the link, not write through it),
@@ -399,7 +401,7 @@ def read_planes(path: str | Path) -> np.ndarray:
     """The whole planes/media TIFF, either encoding, as (rows, cols, 4) uint8 (tests and
     small jobs)."""
     with tifffile.TiffFile(str(path)) as tf:
-        page = tf.pages[0]
+        page = cast(tifffile.TiffPage, tf.pages[0])       # the first page: never a frame
         if (page.is_tiled and page.compression == 8 and page.predictor == 1 and page.planarconfig == 1
                 and page.bitspersample == 8 and page.shape[2:] == (4,) and len(page.shape) == 3):
             return _read_tiles(tf.filehandle, page)
@@ -409,7 +411,7 @@ def read_planes(path: str | Path) -> np.ndarray:
     return data.view(np.uint8) if data.dtype == np.bool_ else data
 
 
-def _read_tiles(fh, page) -> np.ndarray:
+def _read_tiles(fh: Any, page: Any) -> np.ndarray:
     """An 8bit file's tiles inflated by ISA-L on two threads (twice zlib's speed: reading a
     full-width print's media back is a good part of an acceptance test's time)."""
     from isal import isal_zlib
@@ -418,7 +420,7 @@ def _read_tiles(fh, page) -> np.ndarray:
     across = -(-w // tw)
     out = np.empty((h, w, 4), np.uint8)
 
-    def inflate(k, data):
+    def inflate(k: int, data: bytes) -> None:
         y, x = (k // across) * th, (k % across) * tw
         hh, ww = min(th, h - y), min(tw, w - x)
         if not data:                                 # a tile never written: blank, as in tifffile
@@ -426,7 +428,7 @@ def _read_tiles(fh, page) -> np.ndarray:
             return
         try:
             tile = np.frombuffer(isal_zlib.decompress(data, bufsize=th * tw * 4), np.uint8)
-        except isal_zlib.error as exc:
+        except isal_zlib.error as exc:  # type: ignore[misc]  # isal's stub types it as a function
             raise ValueError(f"{fh.name}: tile {k} does not inflate: {exc}") from None
         if tile.size != th * tw * 4:
             raise ValueError(f"{fh.name}: tile {k} holds {tile.size} bytes, not {th * tw * 4}")
@@ -443,7 +445,7 @@ def _read_tiles(fh, page) -> np.ndarray:
 def planes_format(path: str | Path) -> str:
     """"8bit" or "packed": which encoding a planes/media TIFF uses (docs/formats.md)."""
     with tifffile.TiffFile(str(path)) as tf:
-        return "packed" if tf.pages[0].bitspersample == 1 else "8bit"
+        return "packed" if cast(tifffile.TiffPage, tf.pages[0]).bitspersample == 1 else "8bit"
 
 
 # Ink colours on white paper (sRGB), for previews of planes and media.
@@ -463,7 +465,7 @@ def render_rgb(planes: np.ndarray) -> np.ndarray:
 READ_BUFFER = 1 << 20      # bytes of a planes file read at once (iter_planes)
 
 
-def iter_planes(path: str | Path):
+def iter_planes(path: str | Path) -> Iterator[np.ndarray]:
     """The planes/media TIFF (either encoding) top to bottom as (rows, width, 4) uint8
     bands, one strip or tile row at a time: memory is one band, whatever the print's length."""
     with tifffile.TiffFile(str(path)) as tf:
@@ -471,13 +473,15 @@ def iter_planes(path: str | Path):
         if len(page.shape) != 3 or page.shape[2] != 4:
             raise ValueError(f"{path}: not a 4-channel CMYK planes file (shape {page.shape})")
         h, w = page.shape[:2]
-        band, y0, bh = None, None, 0
+        band: np.ndarray | None = None
+        y0, bh = -1, 0
         # one tile at a time, read from the file 1 MB at a time (tifffile reads up to
         # 256 MB of compressed tiles in one go by default: all of a 0.25 m2 media file)
         for seg, idx, _shape in page.segments(maxworkers=1, buffersize=READ_BUFFER):
             y, x = idx[-3], idx[-2]
-            seg = seg.reshape(seg.shape[-3:])
-            if y != y0:
+            arr = cast(np.ndarray, seg)                # every segment is in the file
+            seg = cast(np.ndarray, arr.reshape(arr.shape[-3:]))
+            if band is None or y != y0:
                 if band is not None:
                     yield band[:min(bh, h - y0)]
                 y0, bh = y, seg.shape[0]
@@ -488,7 +492,7 @@ def iter_planes(path: str | Path):
             yield band[:h - y0]
 
 
-def _resolution(page, tag: str, default: float) -> float:
+def _resolution(page: Any, tag: str, default: float) -> float:
     t = page.tags.get(tag)
     try:
         num, den = t.value
@@ -498,7 +502,8 @@ def _resolution(page, tag: str, default: float) -> float:
 
 
 @kernel()
-def _box_sums(band, y0, by, bx, lut, sums):
+def _box_sums(band: np.ndarray, y0: int, by: int, bx: int, lut: np.ndarray,
+              sums: np.ndarray) -> None:
     """Add the ink colour of every dot of `band` (rows from y0) into its by x bx box."""
     for r in range(band.shape[0]):
         yy = (y0 + r) // by
