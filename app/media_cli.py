@@ -31,7 +31,8 @@ def job_settings(args, profile):
     media = find(name)
     if not media.icc_path.is_file():
         raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
-    mapping = {**media.settings_defaults(), "output_icc": str(media.icc_path), **given}
+    mapping = {**media.settings_defaults(), **given}
+    mapping = {"output_icc": str(media.icc_for(int(mapping["dpi"]))), **mapping}
     profile = apply_to_profile(media, profile, int(mapping["dpi"]))
     return profile, from_mapping(mapping, profile)
 
@@ -126,8 +127,12 @@ def cmd_verify(args) -> int:
     from . import mediacal
     from .medialib import find
     m = find(args.name)
+    kept: dict = {}
     r = mediacal.verify(m, _profile(args), count=args.patches, seed=args.seed,
-                        inject=tuple(args.inject or ()), progress=_say(args), dpi=args.dpi)
+                        inject=tuple(args.inject or ()), progress=_say(args), dpi=args.dpi,
+                        keep=kept)
+    if args.picture:
+        mediacal.verify_picture(kept, Path(args.picture))
     if args.json:
         print(json.dumps(r, indent=2))
     else:
@@ -247,6 +252,8 @@ def add_parser(sub) -> None:
         q.add_argument("--json", action="store_true")
         if name == "verify":
             q.add_argument("--dpi", type=int, help="verify in this mode of the entry")
+            q.add_argument("--picture", metavar="PNG", help="the report as a picture: each "
+                           "patch aimed at (upper half) and measured (lower half)")
             q.add_argument("--patches", type=int, default=150)
             q.add_argument("--seed", type=int, default=7)
 

@@ -231,22 +231,25 @@ def _lookup(icc, values: np.ndarray, direction: str, width: int) -> np.ndarray:
     return out[:, :width]
 
 
-def control_chart(media_icc: Path, count: int = 150, seed: int = 7,
+def control_chart(media_iccs, count: int = 150, seed: int = 7,
                   gamut_de: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """An independent control chart: random sRGB colours (this seed) that lie in the
-    media's gamut (Lab -> the profile's B2A -> A2B returns within `gamut_de`): their
-    8-bit RGB (n, 3) and their Lab (sRGB, D50 relative: what relative colorimetric
-    printing aims at)."""
+    gamut of every profile given (Lab -> the profile's B2A -> A2B returns within
+    `gamut_de`): their 8-bit RGB (n, 3) and their Lab (sRGB, D50 relative: what relative
+    colorimetric printing aims at)."""
     from ..device_sim.spectral import delta_e2000
     srgb = argyll.REF_DIR / "sRGB.icm"
     if not srgb.is_file():
         raise argyll.ArgyllError(f"{srgb} is missing. {argyll.INSTALL_HINT}")
     rng = np.random.default_rng(seed)
-    rgb = rng.integers(0, 256, (count * 4, 3)).astype(np.uint8)
+    rgb = rng.integers(0, 256, (count * 100, 3)).astype(np.uint8)   # a small gamut keeps ~1 %
     lab = _lookup(srgb, rgb / 255.0, "f", 3)
-    dev = _lookup(media_icc, lab, "b", 4)
-    back = _lookup(media_icc, np.clip(dev, 0, 1), "f", 3)
-    keep = np.nonzero(delta_e2000(lab, back) <= gamut_de)[0][:count]
+    inside = np.ones(len(lab), bool)
+    for icc in media_iccs:
+        dev = _lookup(icc, lab, "b", 4)
+        back = _lookup(icc, np.clip(dev, 0, 1), "f", 3)
+        inside &= delta_e2000(lab, back) <= gamut_de
+    keep = np.nonzero(inside)[0][:count]
     return rgb[keep], lab[keep]
 
 
@@ -287,9 +290,29 @@ def relinearise_modes(values: dict, profile, inject=(), progress: Progress = _qu
         path = (folder or Path(tempfile.gettempdir())) / f"wedge-{dpi}{suffix}.ti3"
         lab = measure_chart(pr, wedge_values([int(v) for v in steps]),
                             with_budget(profile, dpi, b), path)
-        out[key] = {"drop_budget": b,
+        out[key] = {**values["modes"][key], "drop_budget": b,
                     "curves": curves_for(delta_e_from_paper(lab, steps), values["reference"])}
     return out
+
+
+def mode_profile(values: dict, key: str, levels: np.ndarray, profile, folder: Path,
+                 tmp: Path, limit: float, quality: str, inject=(),
+                 progress: Progress = _quiet) -> dict:
+    """A mode's own ICC profile: the profiling chart printed in that mode (its budget and
+    curves) and measured, colprof.  The curves make each ink alone match; the overprints
+    of a coarser mode do not (150 dpi's dots land on each other's cells), the profile
+    takes them as they are."""
+    dpi = int(key)
+    progress(f"    {dpi} dpi: the profiling chart and its profile")
+    media = Media(folder, dict(values))
+    pr = printer_for({**values, "dpi": dpi}, profile, inject)
+    stem = tmp / f"profiling-{dpi}"
+    measure_chart(pr, levels, apply_to_profile(media, profile, dpi), stem.with_suffix(".ti3"), limit)
+    icc = argyll.colprof(stem, limit, quality, description=f"wideprint {values['name']} {dpi} dpi")
+    (folder / f"profile-{dpi}.icc").write_bytes(icc.read_bytes())
+    (folder / f"profiling-{dpi}.ti3").write_bytes(stem.with_suffix(".ti3").read_bytes())
+    return {"icc": f"profile-{dpi}.icc",
+            "profcheck": argyll.profcheck(stem.with_suffix(".ti3"), icc)}
 
 
 def printer_for(media_values: dict, profile, inject=(), workdir=None) -> Printer:
@@ -358,12 +381,17 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
         check = argyll.profcheck(stem.with_suffix(".ti3"), icc)
         (folder / "profile.icc").write_bytes(icc.read_bytes())
         (folder / "profiling.ti3").write_bytes(stem.with_suffix(".ti3").read_bytes())
-    values["icc"] = "profile.icc"
-    values["measurements"] = ["wedge.ti3", "tac.ti3", "profiling.ti3"]
-    if values["modes"]:
-        progress("    the other dpi modes: " + ", ".join(values["modes"]))
-        values["modes"] = relinearise_modes(values, profile, inject, progress, folder)
-        values["measurements"] += [f"wedge-{k}.ti3" for k in values["modes"]]
+        values["icc"] = "profile.icc"
+        values["measurements"] = ["wedge.ti3", "tac.ti3", "profiling.ti3"]
+        if values["modes"]:
+            progress("    the other dpi modes: " + ", ".join(values["modes"]))
+            values["modes"] = relinearise_modes(values, profile, inject, progress, folder)
+            values["measurements"] += [f"wedge-{k}.ti3" for k in values["modes"]]
+            for key in values["modes"]:
+                values["modes"][key].update(mode_profile(values, key, levels, profile, folder,
+                                                         Path(tmp), limit, quality, inject,
+                                                         progress))
+                values["measurements"].append(f"profiling-{key}.ti3")
     values["build"] = {"patches": int(len(levels)), "profcheck": check,
                        "seconds": round(time.monotonic() - t0, 1), **timings,
                        "injected": list(inject)}
@@ -379,13 +407,14 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
     compare with what it aims at: ΔE2000 mean, p95, max against the tolerances."""
     from ..device_sim.spectral import delta_e2000
     progress(f"control chart: {count} in-gamut colours (seed {seed})")
-    rgb, aim = control_chart(media.icc_path, count, seed)
-    values = np.concatenate([np.full((1, 3), 255, np.uint8), rgb])   # patch 0: paper
     dpi = int(dpi or media.values["dpi"])
+    # the same chart in every mode of the entry: colours inside all of their gamuts
+    rgb, aim = control_chart(media.all_iccs(), count, seed)
+    values = np.concatenate([np.full((1, 3), 255, np.uint8), rgb])   # patch 0: paper
     pr = printer_for({**media.values, "dpi": dpi}, profile, inject)
     progress(f"printing and measuring {len(values)} patches at {dpi} dpi")
     lab = pr.measure(values, apply_to_profile(media, profile, dpi),
-                     rgb_icc=str(argyll.REF_DIR / "sRGB.icm"), output_icc=str(media.icc_path),
+                     rgb_icc=str(argyll.REF_DIR / "sRGB.icm"), output_icc=str(media.icc_for(dpi)),
                      name="verify")
     rel = bradford_relative(lab[1:], lab[0])
     de = delta_e2000(aim, rel)
@@ -393,7 +422,7 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
     tol = media.values["tolerances"]
     failed = [k for k in ("mean", "p95", "max") if k in tol and result[k] > tol[k]]
     if keep is not None:              # the raw measurements, for comparing modes
-        keep.update(lab=lab, ink_ml_m2=pr.last_ink_ml_m2)
+        keep.update(lab=lab, ink_ml_m2=pr.last_ink_ml_m2, aim=aim, measured=rel, de=de)
     return {"media": media.name, "version": media.version, "intent": "relative", "dpi": dpi,
             **result, "tolerances": tol, "pass": not failed, "failed": failed,
             "seed": seed, "injected": list(inject), "paper_lab": [round(float(v), 2) for v in lab[0]],
@@ -431,3 +460,34 @@ def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet) -
 
 def media_with(media: Media, **changes) -> Media:
     return replace(media, values={**media.values, **changes})
+
+
+def lab_to_srgb8(lab: np.ndarray) -> np.ndarray:
+    """D50 Lab -> 8-bit sRGB for a picture (Bradford D50 -> D65, IEC 61966-2-1), clipped."""
+    from ..device_sim.spectral import lab_to_xyz
+    xyz = lab_to_xyz(lab)
+    bradford = np.array([[0.9555766, -0.0230393, 0.0631636], [-0.0282895, 1.0099416, 0.0210077],
+                         [0.0122982, -0.0204830, 1.3299098]])          # D50 -> D65
+    m = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                  [0.0556434, -0.2040259, 1.0572252]])
+    rgb = np.clip(xyz @ bradford.T @ m.T, 0, 1)
+    rgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1 / 2.4) - 0.055)
+    return np.round(rgb * 255).astype(np.uint8)
+
+
+def verify_picture(keep: dict, path: Path, cell: int = 48, across: int = 15) -> None:
+    """The verify report as a picture: each control patch as a square, its upper half the
+    colour aimed at, its lower half the colour measured, a red frame where ΔE2000 > 3."""
+    import cv2
+    aim, got, de = lab_to_srgb8(keep["aim"]), lab_to_srgb8(keep["measured"]), keep["de"]
+    n = len(de)
+    down = math.ceil(n / across)
+    img = np.full((down * cell, across * cell, 3), 255, np.uint8)
+    for i in range(n):
+        r, c = divmod(i, across)
+        y, x = r * cell, c * cell
+        img[y + 2:y + cell // 2, x + 2:x + cell - 2] = aim[i]
+        img[y + cell // 2:y + cell - 2, x + 2:x + cell - 2] = got[i]
+        if de[i] > 3.0:
+            cv2.rectangle(img, (x + 1, y + 1), (x + cell - 2, y + cell - 2), (255, 0, 0), 2)
+    cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))

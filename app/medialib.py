@@ -63,8 +63,8 @@ FIELDS: tuple[Field, ...] = (
           "points [in, out] on 0..255, applied after the separation"),
     Field("drop_budget", "table", {}, "dpi mode -> fraction of each ink amount it prints "
           "(docs/color.md); empty: the printer profile's"),
-    Field("modes", "table", {}, "other dpi modes: dpi -> drop_budget and curves, each "
-          "mode linearised to the same reference at the same ink per m2"),
+    Field("modes", "table", {}, "other dpi modes: dpi -> drop_budget, curves, icc and "
+          "profcheck: each mode linearised to the same reference and profiled in its mode"),
     Field("icc", "str", "profile.icc", "the ICC output profile (in the entry's folder)"),
     Field("measurements", "list", [], "the measurement files it was built from (CGATS "
           ".ti3, in the entry's folder)"),
@@ -94,6 +94,15 @@ class Media:
     @property
     def icc_path(self) -> Path:
         return self.folder / self.values["icc"]
+
+    def icc_for(self, dpi: int | None) -> Path:
+        """The profile of a dpi mode: the mode's own if the entry has one, else the entry's."""
+        mode = self.values["modes"].get(str(dpi), {}) if dpi is not None else {}
+        return self.folder / mode["icc"] if mode.get("icc") else self.icc_path
+
+    def all_iccs(self) -> list[Path]:
+        return [self.icc_path] + [self.folder / m["icc"] for m in self.values["modes"].values()
+                                  if m.get("icc")]
 
     def curves_255(self) -> dict[str, list[list[float]]]:
         """Each ink's curve with its channel limit applied (the curve's output scaled)."""

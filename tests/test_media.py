@@ -228,3 +228,25 @@ def test_each_dpi_mode_of_an_entry_has_its_own_curves_and_budget(library):
     assert mediacal.mode_budget(m.values, 150) == 1.0
     with pytest.raises(ValueError, match="150 dpi cannot lay down"):
         mediacal.mode_budget({**m.values, "drop_budget": {}}, 150)
+
+
+@needs_argyll
+def test_every_dpi_mode_prints_the_same_colour(profile, tmp_path):
+    """One entry at 300 dpi (budget 0.5: 150 dpi's ink) with modes 150 and 600, each
+    linearised and profiled in its mode: the same control chart within ΔE2000 1.5 mean of
+    each other; 300 and 600 dpi also within 5 % of the same ink per m² (150 dpi needs
+    more: its inks' dots land on the same cells, docs/media.md)."""
+    import itertools
+    from wideprint.device_sim.spectral import delta_e2000
+    values = medialib.check_values({"name": "modes"})
+    values = mediacal.create(tmp_path / "modes", values, profile, patches=600, budget=0.5,
+                             modes=(150, 600))
+    m = medialib.save(medialib.Media(tmp_path / "modes", medialib.check_values(values)))
+    kept = {}
+    for dpi in (150, 300, 600):
+        kept[dpi] = {}
+        assert mediacal.verify(m, profile, dpi=dpi, keep=kept[dpi])["pass"]
+    for a, b in itertools.combinations((150, 300, 600), 2):
+        assert delta_e2000(kept[a]["lab"], kept[b]["lab"]).mean() <= 1.5, (a, b)
+    ink = {d: sum(kept[d]["ink_ml_m2"]) for d in kept}
+    assert abs(ink[600] / ink[300] - 1) <= 0.05, ink
