@@ -681,13 +681,14 @@ class MainWindow(QMainWindow):
 
     def confirm(self, title: str, text: str, detail: str = "") -> bool:
         """Ask before a destructive action (a modal Yes/No box, No the default)."""
-        box = QMessageBox(QMessageBox.Warning, title, text, QMessageBox.Yes | QMessageBox.No, self)
+        box = QMessageBox(QMessageBox.Icon.Warning, title, text,
+                          QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, self)
         box.setObjectName("confirm_box")
-        box.setDefaultButton(QMessageBox.No)
-        box.setEscapeButton(QMessageBox.No)
+        box.setDefaultButton(QMessageBox.StandardButton.No)
+        box.setEscapeButton(QMessageBox.StandardButton.No)
         if detail:
             box.setInformativeText(detail)
-        return box.exec() == QMessageBox.Yes
+        return box.exec() == QMessageBox.StandardButton.Yes
 
     @staticmethod
     def _started(j: dict) -> bool:

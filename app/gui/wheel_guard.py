@@ -38,7 +38,7 @@ def guard_wheel(root: QWidget) -> int:
         if w.property("wheel_guarded"):
             continue
         w.setProperty("wheel_guarded", True)
-        w.setFocusPolicy(Qt.StrongFocus)
+        w.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         w.installEventFilter(_GUARD)
         n += 1
     return n
