@@ -45,6 +45,15 @@ def _say(args):
     return progress
 
 
+def _where(args) -> dict:
+    """Where charts print and who measures them: the emulator's spectrophotometer, or
+    (--measure-dir) an outside instrument whose .ti3 files are waited for."""
+    where = {"device": args.device, "progress": _say(args)}
+    if args.measure_dir:
+        where.update(measure_dir=Path(args.measure_dir), wait_s=args.wait)
+    return where
+
+
 def _profile(args):
     from ..rip.profile import load_profile
     return load_profile(getattr(args, "profile", None))
@@ -100,7 +109,7 @@ def cmd_create(args) -> int:
                              inject=tuple(args.inject or ()), quality=args.quality,
                              progress=say, budget=args.drop_budget,
                              modes=tuple(int(v) for v in args.modes.split(",") if v)
-                             if args.modes else ())
+                             if args.modes else (), where=_where(args))
     m = save(Media(dest, check_values(values)))
     if args.json:
         print(json.dumps({"name": name, "folder": str(dest), **m.values["build"]}, indent=2))
@@ -130,7 +139,7 @@ def cmd_verify(args) -> int:
     kept: dict = {}
     r = mediacal.verify(m, _profile(args), count=args.patches, seed=args.seed,
                         inject=tuple(args.inject or ()), progress=_say(args), dpi=args.dpi,
-                        keep=kept)
+                        keep=kept, where=_where(args))
     if args.picture:
         mediacal.verify_picture(kept, Path(args.picture))
     if args.json:
@@ -150,7 +159,7 @@ def cmd_recalibrate(args) -> int:
         shutil.copytree(m.folder, dest, dirs_exist_ok=True)
         m = Media(dest, m.values)
     values = mediacal.recalibrate(m, _profile(args), inject=tuple(args.inject or ()),
-                                  progress=_say(args))
+                                  progress=_say(args), where=_where(args))
     values["updated"] = now()
     m = save(Media(m.folder, check_values(values)))
     shift = values["build"]["recalibrated"]["max_shift_de"]
@@ -188,7 +197,7 @@ def cmd_media(args) -> int:
     t0 = time.monotonic()
     try:
         return args.media_func(args)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError) as exc:      # (TimeoutError is an OSError)
         print(f"wideprint media {args.media_command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except ArgyllError as exc:
@@ -197,6 +206,16 @@ def cmd_media(args) -> int:
     finally:
         if args.verbose_time:
             print(f"{time.monotonic() - t0:.1f} s", file=sys.stderr)
+
+
+def _device_options(q) -> None:
+    q.add_argument("--device", default="emulator", help="where the charts print (default: "
+                   "the in-process emulator, measured by its spectrophotometer)")
+    q.add_argument("--measure-dir", metavar="DIR", help="measure outside wideprint: each "
+                   "chart's picture and patches go to DIR/NAME.tif and NAME.ti1, and its "
+                   "measurement DIR/NAME.ti3 (chartread's CGATS) is waited for")
+    q.add_argument("--wait", type=float, default=86400.0, metavar="S",
+                   help="how long to wait for a measurement file (default a day)")
 
 
 def add_parser(sub) -> None:
@@ -239,6 +258,7 @@ def add_parser(sub) -> None:
     q.add_argument("--profile", metavar="TOML")
     q.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
     q.add_argument("--json", action="store_true")
+    _device_options(q)
 
     for name, func, help_ in (("verify", cmd_verify, "print and measure a control chart: "
                                "ΔE2000 against the entry's tolerances (exit 1: fail)"),
@@ -250,6 +270,7 @@ def add_parser(sub) -> None:
         q.add_argument("--inject", action="append", metavar="KIND=VALUE",
                        help="emulator fault, e.g. dot-gain=+8%%")
         q.add_argument("--json", action="store_true")
+        _device_options(q)
         if name == "verify":
             q.add_argument("--dpi", type=int, help="verify in this mode of the entry")
             q.add_argument("--picture", metavar="PNG", help="the report as a picture: each "

@@ -48,6 +48,10 @@ class Printer:
     inject: tuple[str, ...] = ()        # emulator faults (--inject), e.g. a drift
     workdir: Path | None = None
     last_ink_ml_m2: list | None = None  # the last chart's ink per m² of its area, per ink
+    device: str = "emulator"            # where the charts print (app/devices.py specs)
+    measure_dir: Path | None = None     # an outside instrument: charts and measurements here
+    wait_s: float = 24 * 3600.0         # how long to wait for a chart's measurement file
+    progress: Progress = _quiet
 
     def _settings(self, **more):
         from ..rip.settings import Placement, RipSettings
@@ -89,10 +93,17 @@ class Printer:
         from ..device_sim.spectro import measure_patches
         from ..driver.job import PrintJob
         from ..rip.pipeline import RipJob
-        from .devices import open_device
+        from .devices import close_device, open_device
         profile = profile or self.profile
         values = np.asarray(values)
         img, rects = self.chart(values, values.shape[1])
+        spectro = self.measure_dir is None
+        if not spectro:
+            stale = Path(self.measure_dir) / f"{name}.ti3"
+            stale.unlink(missing_ok=True)            # the measurement of an earlier print
+        elif self.device != "emulator":
+            raise ValueError(f"--device {self.device}: charts on a real printer are measured "
+                             f"outside wideprint: give --measure-dir DIR")
         with tempfile.TemporaryDirectory(prefix="wideprint-media-", dir=self.workdir) as tmp:
             src = Path(tmp) / f"{name}.tif"
             tifffile.imwrite(src, img, photometric="separated" if img.shape[2] == 4 else "rgb",
@@ -101,16 +112,72 @@ class Printer:
             settings = self._settings(input_icc=rgb_icc, output_icc=output_icc,
                                       ink_limit=ink_limit)
             job = RipJob(str(src), settings, profile)
-            dev = open_device("emulator", profile, Faults.parse(list(self.inject)),
-                              spectro_path=lab_path, spectro_dpi=SPECTRO_DPI)
+            faults = Faults.parse(list(self.inject)) if self.device == "emulator" else None
+            opts = dict(spectro_path=lab_path, spectro_dpi=SPECTRO_DPI) if spectro else {}
+            dev = open_device(self.device, profile, faults, **opts)
             try:
                 rep = PrintJob(dev, job).run()
                 area_m2 = (job.width * 0.0254 / self.dpi) * (job.height * profile.row_um * 1e-6)
                 self.last_ink_ml_m2 = [float(v) / area_m2 for v in rep.ink_ml]
             finally:
-                dev.emulator.close()
+                close_device(dev)
                 job.close()
-            return measure_patches(lab_path, rects, inset_mm=INSET_MM)
+            if spectro:
+                return measure_patches(lab_path, rects, inset_mm=INSET_MM)
+            return await_measurements(Path(self.measure_dir), name, values, img, rects,
+                                      self.dpi, self.wait_s, self.progress)
+
+
+def await_measurements(folder: Path, name: str, values: np.ndarray, img: np.ndarray,
+                       rects: list, dpi: int, wait_s: float, progress: Progress = _quiet,
+                       poll_s: float = 1.0) -> np.ndarray:
+    """A chart measured by an outside instrument: the printed chart's image NAME.tif and
+    its patches NAME.ti1 (CGATS: SAMPLE_ID, device values in percent, the patch's place in
+    mm) go to `folder`; then wait for NAME.ti3 (as Argyll's chartread writes it: LAB_L/A/B
+    or XYZ_X/Y/Z per SAMPLE_ID) and return Lab (n, 3) in patch order."""
+    import tifffile
+    from ..device_sim.spectral import xyz_to_lab
+    folder.mkdir(parents=True, exist_ok=True)
+    tifffile.imwrite(folder / f"{name}.tif", img,
+                     photometric="separated" if img.shape[2] == 4 else "rgb",
+                     resolution=(dpi, dpi))
+    cmyk = values.shape[1] == 4
+    fields = (["CMYK_C", "CMYK_M", "CMYK_Y", "CMYK_K"] if cmyk else ["RGB_R", "RGB_G", "RGB_B"])
+    fields = ["SAMPLE_ID", *fields, "X0_MM", "Y0_MM", "X1_MM", "Y1_MM"]
+    rows = [f"{i + 1} " + " ".join(f"{v / 2.55:.5f}" for v in row) + " "
+            + " ".join(f"{v:.3f}" for v in rect) for i, (row, rect) in enumerate(zip(values, rects))]
+    (folder / f"{name}.ti1").write_text("\n".join(
+        ["CTI1   ", "", 'DESCRIPTOR "wideprint chart: measure each patch, write NAME.ti3"',
+         'ORIGINATOR "wideprint media"', f'COLOR_REP "{"CMYK" if cmyk else "RGB"}"', "",
+         f"NUMBER_OF_FIELDS {len(fields)}", "BEGIN_DATA_FORMAT", " ".join(fields),
+         "END_DATA_FORMAT", "", f"NUMBER_OF_SETS {len(rows)}", "BEGIN_DATA", *rows,
+         "END_DATA", ""]))
+    ti3 = folder / f"{name}.ti3"
+    progress(f"    printed: measure {folder / name}.tif ({len(rows)} patches, "
+             f"{folder / name}.ti1) and write {ti3}")
+    deadline = time.monotonic() + wait_s
+    last = None
+    while True:
+        if ti3.is_file():
+            size = ti3.stat().st_size
+            if size == last:                       # written completely
+                break
+            last = size
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no measurement {ti3} within {wait_s:g} s")
+        time.sleep(poll_s)
+    t = argyll.read_cgats(ti3)
+    ids = [int(float(v)) for v in (r[t.fields.index("SAMPLE_ID")] for r in t.rows)]
+    if "LAB_L" in t.fields:
+        lab = t.columns("LAB_L", "LAB_A", "LAB_B")
+    else:
+        lab = xyz_to_lab(t.columns("XYZ_X", "XYZ_Y", "XYZ_Z") / 100.0)
+    by_id = dict(zip(ids, lab))
+    missing = [i for i in range(1, len(rows) + 1) if i not in by_id]
+    if missing:
+        raise ValueError(f"{ti3}: no measurement of patch {missing[0]} "
+                         f"({len(missing)} of {len(rows)} missing)")
+    return np.array([by_id[i] for i in range(1, len(rows) + 1)])
 
 
 def pct_to_level(pct) -> np.ndarray:
@@ -277,7 +344,8 @@ def mode_budget(values: dict, dpi: int) -> float:
 
 
 def relinearise_modes(values: dict, profile, inject=(), progress: Progress = _quiet,
-                      folder: Path | None = None, suffix: str = "") -> dict:
+                      folder: Path | None = None, suffix: str = "",
+                      where: dict | None = None) -> dict:
     """Each of the entry's other modes: its budget (equal ink per m²) and curves that
     bring its raw wedge to the entry's reference."""
     out = {}
@@ -286,7 +354,7 @@ def relinearise_modes(values: dict, profile, inject=(), progress: Progress = _qu
         dpi = int(key)
         b = mode_budget(values, dpi)
         progress(f"    {dpi} dpi: wedge at budget {b:g}")
-        pr = printer_for({**values, "dpi": dpi}, profile, inject)
+        pr = printer_for({**values, "dpi": dpi}, profile, inject, where)
         path = (folder or Path(tempfile.gettempdir())) / f"wedge-{dpi}{suffix}.ti3"
         lab = measure_chart(pr, wedge_values([int(v) for v in steps]),
                             with_budget(profile, dpi, b), path)
@@ -297,7 +365,7 @@ def relinearise_modes(values: dict, profile, inject=(), progress: Progress = _qu
 
 def mode_profile(values: dict, key: str, levels: np.ndarray, profile, folder: Path,
                  tmp: Path, limit: float, quality: str, inject=(),
-                 progress: Progress = _quiet) -> dict:
+                 progress: Progress = _quiet, where: dict | None = None) -> dict:
     """A mode's own ICC profile: the profiling chart printed in that mode (its budget and
     curves) and measured, colprof.  The curves make each ink alone match; the overprints
     of a coarser mode do not (150 dpi's dots land on each other's cells), the profile
@@ -305,7 +373,7 @@ def mode_profile(values: dict, key: str, levels: np.ndarray, profile, folder: Pa
     dpi = int(key)
     progress(f"    {dpi} dpi: the profiling chart and its profile")
     media = Media(folder, dict(values))
-    pr = printer_for({**values, "dpi": dpi}, profile, inject)
+    pr = printer_for({**values, "dpi": dpi}, profile, inject, where)
     stem = tmp / f"profiling-{dpi}"
     measure_chart(pr, levels, apply_to_profile(media, profile, dpi), stem.with_suffix(".ti3"), limit)
     icc = argyll.colprof(stem, limit, quality, description=f"wideprint {values['name']} {dpi} dpi")
@@ -315,22 +383,24 @@ def mode_profile(values: dict, key: str, levels: np.ndarray, profile, folder: Pa
             "profcheck": argyll.profcheck(stem.with_suffix(".ti3"), icc)}
 
 
-def printer_for(media_values: dict, profile, inject=(), workdir=None) -> Printer:
+def printer_for(media_values: dict, profile, inject=(), where: dict | None = None) -> Printer:
+    """The printer in the entry's print mode; `where`: device, measure_dir, wait_s,
+    progress (Printer's fields) for charts printed elsewhere than the emulator."""
     return Printer(profile, dpi=int(media_values["dpi"]), passes=int(media_values["passes"]),
                    bidir=bool(media_values["bidir"]), dither=str(media_values["dither"]),
-                   inject=tuple(inject), workdir=workdir)
+                   inject=tuple(inject), **(where or {}))
 
 
 def create(folder: Path, values: dict, profile, patches: int = 1000,
            ink_limit: float | None = None, linearise: bool = True, inject=(),
            quality: str = "m", progress: Progress = _quiet, budget: float = 1.0,
-           modes: tuple[int, ...] = ()) -> dict:
+           modes: tuple[int, ...] = (), where: dict | None = None) -> dict:
     """Run the loop and fill `values` (the entry's fields) and `folder` (profile.icc,
     wedge.ti3, tac.ti3, profiling.ti3).  Returns the values."""
     t0 = time.monotonic()
     folder.mkdir(parents=True, exist_ok=True)
     argyll.tool("targen"), argyll.tool("colprof"), argyll.tool("profcheck")   # fail early
-    pr = printer_for(values, profile, inject)
+    pr = printer_for(values, profile, inject, where)
     timings = {}
     main = int(values["dpi"])
     values["drop_budget"] = {str(main): float(budget)} if budget != 1.0 else {}
@@ -385,12 +455,13 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
         values["measurements"] = ["wedge.ti3", "tac.ti3", "profiling.ti3"]
         if values["modes"]:
             progress("    the other dpi modes: " + ", ".join(values["modes"]))
-            values["modes"] = relinearise_modes(values, profile, inject, progress, folder)
+            values["modes"] = relinearise_modes(values, profile, inject, progress, folder,
+                                                where=where)
             values["measurements"] += [f"wedge-{k}.ti3" for k in values["modes"]]
             for key in values["modes"]:
                 values["modes"][key].update(mode_profile(values, key, levels, profile, folder,
                                                          Path(tmp), limit, quality, inject,
-                                                         progress))
+                                                         progress, where))
                 values["measurements"].append(f"profiling-{key}.ti3")
     values["build"] = {"patches": int(len(levels)), "profcheck": check,
                        "seconds": round(time.monotonic() - t0, 1), **timings,
@@ -401,7 +472,8 @@ def create(folder: Path, values: dict, profile, patches: int = 1000,
 
 
 def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
-           progress: Progress = _quiet, dpi: int | None = None, keep: dict | None = None) -> dict:
+           progress: Progress = _quiet, dpi: int | None = None, keep: dict | None = None,
+           where: dict | None = None) -> dict:
     """Print the independent control chart through the media (relative colorimetric,
     the RIP's own path: sRGB -> the media's profile -> 3-D LUT -> curves), measure it and
     compare with what it aims at: ΔE2000 mean, p95, max against the tolerances."""
@@ -411,7 +483,7 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
     # the same chart in every mode of the entry: colours inside all of their gamuts
     rgb, aim = control_chart(media.all_iccs(), count, seed)
     values = np.concatenate([np.full((1, 3), 255, np.uint8), rgb])   # patch 0: paper
-    pr = printer_for({**media.values, "dpi": dpi}, profile, inject)
+    pr = printer_for({**media.values, "dpi": dpi}, profile, inject, where)
     progress(f"printing and measuring {len(values)} patches at {dpi} dpi")
     lab = pr.measure(values, apply_to_profile(media, profile, dpi),
                      rgb_icc=str(argyll.REF_DIR / "sRGB.icm"), output_icc=str(media.icc_for(dpi)),
@@ -431,11 +503,12 @@ def verify(media: Media, profile, count: int = 150, seed: int = 7, inject=(),
                       for i in np.argsort(de)[::-1][:5]]}
 
 
-def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet) -> dict:
+def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet,
+                where: dict | None = None) -> dict:
     """One wedge print, new curves that bring each ink's response back to the entry's
     reference (the profile is kept): returns the new values (version + 1)."""
     progress("linearisation wedge: each ink alone, 0-100 % in 5 % steps")
-    pr = printer_for(media.values, profile, inject)
+    pr = printer_for(media.values, profile, inject, where)
     steps = media.values["reference"]["steps"]
     version = int(media.values["version"]) + 1
     name = f"wedge-v{version}.ti3"
@@ -448,7 +521,7 @@ def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet) -
     values["version"] = version
     if values["modes"]:
         values["modes"] = relinearise_modes(values, profile, inject, progress, media.folder,
-                                            f"-v{version}")
+                                            f"-v{version}", where)
     values["measurements"] = [*media.values["measurements"], name]
     shift = {ink: round(float(np.max(np.abs(np.asarray(response[ink]) -
                                             np.asarray(media.values['reference'][ink])))), 2)

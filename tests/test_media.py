@@ -250,3 +250,46 @@ def test_every_dpi_mode_prints_the_same_colour(profile, tmp_path):
         assert delta_e2000(kept[a]["lab"], kept[b]["lab"]).mean() <= 1.5, (a, b)
     ink = {d: sum(kept[d]["ink_ml_m2"]) for d in kept}
     assert abs(ink[600] / ink[300] - 1) <= 0.05, ink
+
+
+def test_charts_measured_outside_wideprint_are_waited_for(tmp_path, profile):
+    """--measure-dir: each chart's picture and patches are written, its .ti3 is waited
+    for (here an 'instrument' thread answers with the model's colour of each patch's
+    nominal coverages) and read by SAMPLE_ID."""
+    import threading
+    from wideprint.device_sim.spectral import SpectralMedia
+    from wideprint.device_sim.spectro import write_ti3
+    folder = tmp_path / "copy"
+    shutil.copytree(medialib.SHIPPED / medialib.DEFAULT_MEDIA, folder)
+    m = medialib.load(folder)
+    measure = tmp_path / "measure"
+    spectral = SpectralMedia.from_profile(profile)
+    stop = threading.Event()
+
+    def instrument():
+        while not stop.is_set():
+            for ti1 in measure.glob("*.ti1") if measure.is_dir() else ():
+                ti3 = ti1.with_suffix(".ti3")
+                if not ti3.exists():
+                    t = argyll.read_cgats(ti1)
+                    dev = t.cmyk
+                    ids = [int(r[0]) for r in t.rows][::-1]            # any order
+                    write_ti3(ti3, dev[::-1], spectral.coverage_lab(dev[::-1] / 100), ids=ids)
+            stop.wait(0.05)
+    th = threading.Thread(target=instrument, daemon=True)
+    th.start()
+    try:
+        values = mediacal.recalibrate(m, profile, where={"measure_dir": measure, "wait_s": 60})
+    finally:
+        stop.set()
+        th.join()
+    assert (measure / "wedge-v2.tif").is_file() and (measure / "wedge-v2.ti1").is_file()
+    assert values["version"] == 2
+    for ink in "CMYK":
+        out = np.array(values["curves"][ink])[:, 1]
+        assert np.all(np.diff(out) >= 0) and out[-1] > 200
+    # a measurement file that lacks patches is refused, naming the file
+    (measure / "x.ti3").write_text((measure / "wedge-v2.ti3").read_text().replace("\n1 ", "\n999 ", 1))
+    with pytest.raises(ValueError, match="no measurement of patch 1"):
+        mediacal.await_measurements(measure, "x", mediacal.wedge_values(), np.zeros((2, 2, 4), np.uint8),
+                                    [(0, 0, 1, 1)] * 84, 300, 5, poll_s=0.01)
