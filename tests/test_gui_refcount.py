@@ -104,3 +104,10 @@ def test_the_pinned_pyside6_is_not_the_defective_one():
     assert pins["PySide6_Essentials"] == pins["shiboken6"] != "6.12.0"
     cfg = (root / "setup.cfg").read_text()
     assert "!=6.12.0" in cfg.split("gui =", 1)[1].split("\n\n", 1)[0]
+
+
+def test_the_gui_warns_at_start_on_the_defective_binding():
+    from wideprint.app.gui import binding_defect
+    assert "6.11.3" in binding_defect("6.12.0", (3, 11))
+    assert binding_defect("6.12.0", (3, 12)) is None
+    assert binding_defect("6.11.3", (3, 11)) is None

@@ -35,6 +35,17 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def binding_defect(pyside: str, python: tuple = sys.version_info[:2]) -> str | None:
+    """Why this PySide6 will not run all day on this Python, or None (docs/gui.md "Which
+    PySide6"): 6.12.0 loses a reference to True/None on every signal emission, fatal within
+    minutes where those objects are mortal (Python < 3.12)."""
+    if pyside == "6.12.0" and tuple(python) < (3, 12):
+        return (f"PySide6 {pyside} on Python {python[0]}.{python[1]} loses a reference to True/None "
+                "on every signal emission and aborts after minutes of server events; install the "
+                "pinned version: pip install -c constraints.txt 'PySide6-Essentials==6.11.3'")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     return run(build_parser().parse_args(sys.argv[1:] if argv is None else argv))
 
@@ -54,6 +65,12 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     from pathlib import Path
+
+    import PySide6
+    why = binding_defect(PySide6.__version__)
+    if why:
+        print(f"wideprint gui: warning: {why}", file=sys.stderr)
+        logging.getLogger("wideprint.gui").warning("%s", why)
 
     from ..server.config import default_state_dir
     from .config import GuiSettings, SETTINGS_FILE, default_config_dir

@@ -499,6 +499,7 @@ class MainWindow(QMainWindow):
             if keep:
                 self.history_view.select_ids(keep)
             self._want_thumbs(jobs)
+            self._forget_old(jobs)
             for j in jobs:
                 if j["id"] in log_ended and j["id"] not in self._ended_logged:
                     self._ended_logged.add(j["id"])
@@ -510,6 +511,16 @@ class MainWindow(QMainWindow):
                                 safe(j["name"]), j["state"], f": {safe(short_paths(msg))}" if msg else "")
         self.link.call(lambda c: c.request("GET", f"/v1/jobs?state=done,failed,cancelled&limit="
                                               f"{HISTORY_ROWS}&newest=1")["jobs"], got)
+
+    def _forget_old(self, history: list) -> None:
+        """Thumbnails and notes of jobs no longer shown (older than the history's rows) go:
+        a GUI open all day keeps what it shows, not every job it ever saw."""
+        keep = {j["id"] for j in history} | {j["id"] for j in self.active}
+        for m in (self.queue_model, self.history_model):
+            for job_id in [k for k in m.thumbs if k not in keep]:
+                del m.thumbs[job_id]
+        self._thumbs_asked = {k for k in self._thumbs_asked if k[0] in keep}
+        self._ended_logged &= keep
 
     def _want_thumbs(self, jobs: list) -> None:
         for j in jobs:
