@@ -257,3 +257,27 @@ def test_add_files_as_held_in_the_order_given_and_the_new_jobs_selected(qtbot, w
     # look, then release: it prints
     win.actions_["release"].trigger()
     qtbot.waitUntil(lambda: all(j["state"] != "held" for j in server.client.jobs()), timeout=10_000)
+
+
+def test_an_edit_says_what_changed_and_undo_puts_it_back(qtbot, win, server, tmp_path):
+    a, _ = image(tmp_path, "banner2.tif", 66)
+    b, _ = image(tmp_path, "banner3.tif", 67)
+    server.client.submit(a, settings={"placement": {"size": "physical"}})
+    server.client.submit(b)
+    qtbot.waitUntil(lambda: len(win.queue_model.jobs) == 2, timeout=20_000)
+    select(win, ["banner2.tif", "banner3.tif"])
+    combo = win.form.fields["placement.size"].w
+    combo.setCurrentIndex(combo.findData("pixels"))
+    combo.activated.emit(combo.currentIndex())
+    qtbot.waitUntil(lambda: all((j["settings"].get("placement") or {}).get("size") == "pixels"
+                                for j in server.client.jobs()), timeout=10_000)
+    # what changed, from what, in the log and the status bar
+    qtbot.waitUntil(lambda: "physical → pixels" in win.logview.toPlainText(), timeout=5_000)
+    assert "pixels" in win.statusBar().currentMessage()
+    undo = win.actions_["undo"]
+    assert undo.isEnabled() and undo.shortcut().toString() == "Ctrl+Z"
+    undo.trigger()
+    qtbot.waitUntil(lambda: {j["name"]: j["settings"] for j in server.client.jobs()} ==
+                    {"banner2.tif": {"placement": {"size": "physical"}}, "banner3.tif": {}},
+                    timeout=10_000)
+    assert not undo.isEnabled()

@@ -32,7 +32,7 @@ from .preview import PreviewPanel
 from .printers_panel import PrintersPanel
 from .server_link import ServerLink
 from .wheel_guard import guard_wheel
-from .settings_form import SettingsForm, apply_edit, settings_patch
+from .settings_form import JOB_FIELDS_KEYS, SettingsForm, apply_edit, effective, settings_patch
 
 log = logging.getLogger("wideprint.gui")
 
@@ -53,6 +53,20 @@ def _rgb_of_png(png: bytes) -> np.ndarray | None:
     # a copy, always: `a` is a view of the QImage's pixels, which go with `img` on return
     # (ascontiguousarray would hand the view itself back when the rows have no padding)
     return a[:, :w * 3].reshape(h, w, 3).copy()
+
+
+def _own_value(job: dict, key: str):
+    """A job's own value of a setting (None: unset, the default) or job field."""
+    if key in dict(JOB_FIELDS_KEYS):
+        return job.get(key)
+    settings = job.get("settings") or {}
+    if key.startswith("placement."):
+        return (settings.get("placement") or {}).get(key.split(".", 1)[1])
+    return settings.get(key)
+
+
+def _shown(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def _m2(a: float) -> str:
@@ -162,6 +176,7 @@ class MainWindow(QMainWindow):
 
         self._faults: dict[str, str] = {}          # printer -> its fault, as logged
         self._fitted = False
+        self._undo: list[tuple] = []                # (key, [(job id, its own value)], text)
         self._select_new: set[int] = set()          # jobs just added: selected when they show
         self._build_actions()
         self._build_ui()
@@ -224,6 +239,9 @@ class MainWindow(QMainWindow):
         self._action("resume_all", "Resume all", lambda: self._queue_paused(False), None, S.SP_MediaPlay)
         self._action("estop", "EMERGENCY STOP", self.emergency_stop, "Ctrl+Shift+Space",
                      S.SP_BrowserStop, "Stop every printer at once")
+        self._action("undo", "&Undo setting change", self.undo_edit, "Ctrl+Z", None,
+                     "Take back the last change of the selected jobs' settings")
+        self.actions_["undo"].setEnabled(False)
         self._action("quit", "&Quit", self.close, "Ctrl+Q", None, "Close the window (the server "
                      "goes on printing the jobs waiting)")
 
@@ -233,6 +251,7 @@ class MainWindow(QMainWindow):
         mb.setObjectName("menu_bar")
         a = self.actions_
         for title, keys in (("&File", ("add", None, "quit")),
+                            ("&Edit", ("undo",)),
                             ("&Jobs", ("hold", "release", "cancel", "requeue", None, "up", "down")),
                             ("&Printers", ("pause_all", "resume_all", None, "estop"))):
             m = mb.addMenu(title)
@@ -622,10 +641,30 @@ class MainWindow(QMainWindow):
             self._save_timer.start()
             return
         body = settings_patch(key, value)
+        olds = [(j["id"], _own_value(j, key)) for j in jobs]
         for j in jobs:
             self.link.call(lambda c, _id=j["id"]: c.edit(_id, **body))
-        log.info("job%s %s: %s = %s", "s" if len(jobs) > 1 else "",
-                 ", ".join(str(j["id"]) for j in jobs), key, "default" if value is None else value)
+        was = sorted({_shown(effective(j, key)) for j in jobs})
+        what = (f"job{'s' if len(jobs) > 1 else ''} {', '.join(str(j['id']) for j in jobs)}: "
+                f"{key} {' / '.join(was)} → {'default' if value is None else _shown(value)}")
+        log.info("%s", what)
+        self._undo.append((key, olds, what))
+        del self._undo[:-50]
+        self.actions_["undo"].setEnabled(True)
+        self.statusBar().showMessage(f"{what}   (Edit > Undo, Ctrl+Z)", 15000)
+
+    def undo_edit(self) -> None:
+        """The last settings edit of jobs taken back: each job's own value before it (unset:
+        back to the default)."""
+        if not self._undo:
+            return
+        key, olds, what = self._undo.pop()
+        self.actions_["undo"].setEnabled(bool(self._undo))
+        for job_id, old in olds:
+            body = settings_patch(key, old)
+            self.link.call(lambda c, _id=job_id, _b=body: c.edit(_id, **_b))
+        log.info("undone: %s", what)
+        self.statusBar().showMessage(f"undone: {what}", 10000)
 
     def open_files_dialog(self) -> None:
         paths, _ = QFileDialog.getOpenFileNames(self, "Add files", self.gs.last_dir, FILE_FILTER)
