@@ -281,3 +281,25 @@ def test_an_edit_says_what_changed_and_undo_puts_it_back(qtbot, win, server, tmp
                     {"banner2.tif": {"placement": {"size": "physical"}}, "banner3.tif": {}},
                     timeout=10_000)
     assert not undo.isEnabled()
+
+
+def test_a_printing_card_shows_the_time_left(qtbot, monkeypatch):
+    """From the strokes printed so far: 10 strokes in 20 s, 40 to go (and a second copy of
+    50) -> about 3:00 left."""
+    from wideprint.app.gui import printers_panel
+    from wideprint.app.gui.printers_panel import PrinterCard
+    card = PrinterCard("main")
+    qtbot.addWidget(card)
+    now = [1000.0]
+    monkeypatch.setattr(printers_panel.time, "monotonic", lambda: now[0])
+
+    def info(done):
+        return dict(name="main", device="emulator", current=dict(
+            id=7, name="x.tif", state="printing", copy=1, copies=2, strokes_total=50,
+            strokes_printed=done))
+    card.show_info(info(0))
+    assert "left" not in card.progress.format()
+    now[0] += 20
+    card.show_info(info(10))
+    assert card.progress.format() == "20 % · 3:00 left", card.progress.format()
+    assert "left" in card.progress.toolTip()

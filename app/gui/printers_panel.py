@@ -7,11 +7,13 @@ Every text has a place of fixed height, so a fault appearing moves nothing."""
 
 from __future__ import annotations
 
+import time
+
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (QFrame, QGridLayout, QHBoxLayout, QLabel, QMenu, QProgressBar,
-                               QPushButton, QScrollArea, QSizePolicy, QToolButton, QVBoxLayout,
-                               QWidget)
+                               QPushButton, QScrollArea, QSizePolicy, QToolButton, QWidget)
 
+from ..estimate import fmt_duration
 from .messages import plain_message, short_paths
 
 
@@ -49,7 +51,7 @@ class PrinterCard(QFrame):
         self.progress.setRange(0, 1000)
         self.progress.setTextVisible(True)
         self.progress.setFormat("")
-        self.progress.setFixedWidth(110)
+        self.progress.setFixedWidth(150)
         self.progress.setFixedHeight(self.job.height())
         g.addWidget(self.progress, 1, 2)
         self.telemetry = _fixed_lines(QLabel(""), 1)
@@ -119,6 +121,7 @@ class PrinterCard(QFrame):
         g.addLayout(row, 4, 0, 1, 3)
         g.setColumnStretch(1, 1)
         self.info: dict = {}
+        self._pace: tuple | None = None        # (job id, copy, first seen at, strokes then)
 
     def show_media(self, png: bytes) -> None:
         from PySide6.QtGui import QImage, QPixmap
@@ -138,6 +141,21 @@ class PrinterCard(QFrame):
         self.busy_text.setToolTip(text or "")
         self.info["_busy"] = on
         self.care.setEnabled(not on and not self.info.get("fault") and not self.info.get("current"))
+
+    def _time_left(self, cur: dict, done: int, total: int) -> float | None:
+        """Seconds left of the job (this copy's strokes and the copies after it), at the pace
+        seen since this card first saw the copy; None until 2 strokes and 2 s are seen."""
+        key = (cur.get("id"), cur.get("copy"))
+        now = time.monotonic()
+        if self._pace is None or self._pace[:2] != key or done < self._pace[3]:
+            self._pace = (*key, now, done)
+            return None
+        _, _, t0, d0 = self._pace
+        if not total or done - d0 < 2 or now - t0 < 2:
+            return None
+        per_stroke = (now - t0) / (done - d0)
+        copies_after = max(0, (cur.get("copies") or 1) - (cur.get("copy") or 1))
+        return per_stroke * ((total - done) + copies_after * total)
 
     def _pause_clicked(self) -> None:
         self.action.emit(self.name, "resume" if self.info.get("paused") else "pause", None)
@@ -175,7 +193,12 @@ class PrinterCard(QFrame):
                              + (f", stroke {done}/{total}" if total else ""))
             self.job.setToolTip(self.job.text())
             self.progress.setValue(int(1000 * done / total) if total else 0)
-            self.progress.setFormat(f"{100 * done / total:.0f} %" if total else "")
+            left = self._time_left(cur, done, total)
+            self.progress.setFormat((f"{100 * done / total:.0f} %" if total else "")
+                                    + (f" · {fmt_duration(left)} left" if left is not None else ""))
+            self.progress.setToolTip("" if left is None else
+                                     f"about {fmt_duration(left)} left, from the pace of the strokes "
+                                     f"printed so far ({cur.get('copies', 1)} copies in all)")
             t = cur.get("telemetry") or {}
             parts = []
             if t:
@@ -192,9 +215,11 @@ class PrinterCard(QFrame):
                 + " ".join(str(w) for w in t.get("fifo_words") or []) + "; head temperatures: "
                 + " ".join(f"{c:.1f}" for c in t.get("head_temps_c") or []))
         else:
+            self._pace = None
             self.job.setText("")
             self.progress.setValue(0)
             self.progress.setFormat("")
+            self.progress.setToolTip("")
             pm = p.get("printable_mm")
             self.telemetry.setText("" if pm is None else
                                    f"paper: {pm:,.0f} mm printable"
