@@ -51,6 +51,8 @@ def _where(args) -> dict:
     where = {"device": args.device, "progress": _say(args)}
     if args.measure_dir:
         where.update(measure_dir=Path(args.measure_dir), wait_s=args.wait)
+    if getattr(args, "scanner_icc", None):
+        where["scanner_icc"] = Path(args.scanner_icc)
     return where
 
 
@@ -102,14 +104,26 @@ def cmd_create(args) -> int:
                            "paper": profile.physical.media, "dpi": args.dpi,
                            "passes": args.passes, "bidir": args.bidir, "dither": args.dither})
     say = _say(args)
+    instrument = "the scanner" if args.scan or args.scanner_icc else \
+        "outside instrument" if args.measure_dir else "spectrophotometer"
     say(f"wideprint media create {name}: {args.dpi} dpi, {args.passes} pass, {args.dither}, "
-        f"on the emulator (spectrophotometer)")
+        f"on {args.device} ({instrument})")
+    scanner_s = None
+    if args.scan and not args.scanner_icc:      # characterise the scanner first
+        from .argyll import tool
+        tool("colprof")
+        t0 = time.monotonic()
+        args.scanner_icc = str(mediacal.scanner_profile(profile, dest, progress=say))
+        scanner_s = round(time.monotonic() - t0, 1)
     values = mediacal.create(dest, values, profile, patches=args.patches,
                              ink_limit=args.ink_limit, linearise=args.linearise,
                              inject=tuple(args.inject or ()), quality=args.quality,
                              progress=say, budget=args.drop_budget,
                              modes=tuple(int(v) for v in args.modes.split(",") if v)
                              if args.modes else (), where=_where(args))
+    if args.scanner_icc:
+        values["build"] = {**values["build"], "scanner_icc": str(args.scanner_icc),
+                           "scanner_profile_s": scanner_s}
     m = save(Media(dest, check_values(values)))
     if args.json:
         print(json.dumps({"name": name, "folder": str(dest), **m.values["build"]}, indent=2))
@@ -216,6 +230,8 @@ def _device_options(q) -> None:
                    "measurement DIR/NAME.ti3 (chartread's CGATS) is waited for")
     q.add_argument("--wait", type=float, default=86400.0, metavar="S",
                    help="how long to wait for a measurement file (default a day)")
+    q.add_argument("--scanner-icc", metavar="ICC", help="measure the charts with the "
+                   "emulated scanner through this input profile (media create --scan makes one)")
 
 
 def add_parser(sub) -> None:
@@ -248,6 +264,8 @@ def add_parser(sub) -> None:
     q.add_argument("--no-linearise", dest="linearise", action="store_false",
                    help="keep the raw response (identity curves) as the reference")
     q.add_argument("--quality", default="m", choices=("l", "m", "h"), help="colprof -q")
+    q.add_argument("--scan", action="store_true", help="measure the charts with the "
+                   "emulated scanner (characterised first: scanner.icc in the entry)")
     q.add_argument("--drop-budget", type=float, default=1.0, metavar="F",
                    help="the fraction of each ink amount the media's mode prints (docs/color.md)")
     q.add_argument("--modes", metavar="DPI,...", help="other dpi modes to linearise to the "

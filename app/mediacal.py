@@ -28,6 +28,7 @@ WEDGE_STEPS = tuple(range(0, 101, 5))            # percent, per ink
 TAC_STEPS = tuple(range(160, 401, 20))           # percent, the ink-limit chart
 SOLVENT_VINYL_MAX_TAC = 300.0                    # the most solvent vinyl takes (percent)
 SPECTRO_DPI = 50
+SCAN_DPI = 150                 # the flatbed's resolution for charts (patch means)
 
 Progress = Callable[[str], None]
 
@@ -52,6 +53,9 @@ class Printer:
     measure_dir: Path | None = None     # an outside instrument: charts and measurements here
     wait_s: float = 24 * 3600.0         # how long to wait for a chart's measurement file
     progress: Progress = _quiet
+    scan_dpi: int | None = None         # also scan each chart (last_scan_rgb: patch means)
+    scanner_icc: Path | None = None     # measure with the scanner through this input profile
+    last_scan_rgb: np.ndarray | None = None
 
     def _settings(self, **more):
         from ..rip.settings import Placement, RipSettings
@@ -114,6 +118,10 @@ class Printer:
             job = RipJob(str(src), settings, profile)
             faults = Faults.parse(list(self.inject)) if self.device == "emulator" else None
             opts = dict(spectro_path=lab_path, spectro_dpi=SPECTRO_DPI) if spectro else {}
+            scan_path = str(Path(tmp) / f"{name}-scan.tif")
+            scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc else None)
+            if scan_dpi:
+                opts.update(scan_path=scan_path, scan_dpi=scan_dpi)
             dev = open_device(self.device, profile, faults, **opts)
             try:
                 rep = PrintJob(dev, job).run()
@@ -122,10 +130,61 @@ class Printer:
             finally:
                 close_device(dev)
                 job.close()
+            if scan_dpi:
+                self.last_scan_rgb = scan_patches(scan_path, rects, scan_dpi)
+                if self.scanner_icc is not None:
+                    return xicclu(self.scanner_icc, self.last_scan_rgb / 255.0, "f")[:, :3]
             if spectro:
                 return measure_patches(lab_path, rects, inset_mm=INSET_MM)
             return await_measurements(Path(self.measure_dir), name, values, img, rects,
                                       self.dpi, self.wait_s, self.progress)
+
+
+def scan_patches(path: str, rects: list, dpi: float, inset_mm: float = INSET_MM) -> np.ndarray:
+    """Each patch's mean 8-bit RGB (n, 3) in a scan of the chart as the emulated scanner
+    writes it (the image area at the scanner's margin, no offset or rotation)."""
+    import tifffile
+    from ..device_sim.scanner import MARGIN_UM
+    scan = tifffile.imread(path).astype(np.float64)
+    pix = 25.4 / dpi
+    margin = round(MARGIN_UM / 1000 / pix) * pix
+    out = []
+    for x0, y0, x1, y1 in rects:
+        u0, v0 = math.ceil((x0 + inset_mm + margin) / pix), math.ceil((y0 + inset_mm + margin) / pix)
+        u1, v1 = math.floor((x1 - inset_mm + margin) / pix), math.floor((y1 - inset_mm + margin) / pix)
+        out.append(scan[v0:v1, u0:u1].reshape(-1, scan.shape[-1]).mean(axis=0))
+    return np.array(out)
+
+
+def scanner_profile(profile, folder: Path, patches: int = 600, seed: int = 11,
+                    progress: Progress = _quiet, where: dict | None = None) -> Path:
+    """Characterise the scanner: random CMYK patches printed once, measured by the
+    spectrophotometer and scanned; colprof makes an input profile (scanner RGB -> XYZ
+    cLUT) of the pairs: DIR/scanner.icc and scanner.ti3."""
+    from ..device_sim.spectral import lab_to_xyz
+    rng = np.random.default_rng(seed)
+    levels = rng.integers(0, 256, (patches, 4)).astype(np.uint8)
+    levels[levels.astype(int).sum(axis=1) > 765] //= 2            # keep within ~300 %
+    levels[:8] = [[0, 0, 0, 0]] * 2 + [[255, 0, 0, 0], [0, 255, 0, 0], [0, 0, 255, 0],
+                                       [0, 0, 0, 255], [255, 255, 0, 0], [0, 0, 0, 0]]
+    pr = Printer(profile, scan_dpi=SCAN_DPI, **(where or {}))
+    progress(f"scanner characterisation chart: {patches} patches, spectrophotometer and scan")
+    lab = pr.measure(levels, profile, name="scanner")
+    rgb = pr.last_scan_rgb
+    xyz = lab_to_xyz(lab) * 100
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = ["CTI3   ", "", 'DESCRIPTOR "Argyll Calibration Target chart information 3"',
+             'ORIGINATOR "wideprint media"', 'DEVICE_CLASS "INPUT"', 'COLOR_REP "XYZ_RGB"', "",
+             "NUMBER_OF_FIELDS 7", "BEGIN_DATA_FORMAT",
+             "SAMPLE_ID RGB_R RGB_G RGB_B XYZ_X XYZ_Y XYZ_Z", "END_DATA_FORMAT", "",
+             f"NUMBER_OF_SETS {patches}", "BEGIN_DATA"]
+    lines += [f"{i + 1} " + " ".join(f"{v / 2.55:.4f}" for v in c) + " "
+              + " ".join(f"{v:.5f}" for v in x) for i, (c, x) in enumerate(zip(rgb, xyz))]
+    lines += ["END_DATA", ""]
+    (folder / "scanner.ti3").write_text("\n".join(lines))
+    progress("colprof: the scanner's input profile")
+    argyll.run("colprof", "-v", "-qm", "-ax", "-u", "scanner", cwd=folder)
+    return folder / "scanner.icc"
 
 
 def await_measurements(folder: Path, name: str, values: np.ndarray, img: np.ndarray,

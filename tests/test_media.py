@@ -293,3 +293,18 @@ def test_charts_measured_outside_wideprint_are_waited_for(tmp_path, profile):
     with pytest.raises(ValueError, match="no measurement of patch 1"):
         mediacal.await_measurements(measure, "x", mediacal.wedge_values(), np.zeros((2, 2, 4), np.uint8),
                                     [(0, 0, 1, 1)] * 84, 300, 5, poll_s=0.01)
+
+
+@needs_argyll
+def test_a_media_made_from_scans_is_within_2_5(library, capsys):
+    """media create --scan: the scanner characterised on this media (a chart measured by
+    the spectrophotometer and scanned once), every chart then measured by scans only; the
+    spectrophotometer verifies: mean ΔE2000 <= 2.5 (issue 33)."""
+    assert main(["media", "create", "scanned", "--scan", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["scanner_icc"].endswith("scanner.icc") and out["profcheck"]["mean"] <= 1.0
+    m = medialib.find("scanned")
+    assert (m.folder / "scanner.icc").is_file() and (m.folder / "scanner.ti3").is_file()
+    main(["media", "verify", "scanned", "--json"])
+    r = json.loads(capsys.readouterr().out)
+    assert r["mean"] <= 2.5, r

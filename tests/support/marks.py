@@ -182,6 +182,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_media_create_runs_the_loop_in_minutes",  # 45
         "test_every_dpi_mode_prints_the_same_colour",  # 120
         "test_charts_measured_outside_wideprint_are_waited_for",  # 2.3
+        "test_a_media_made_from_scans_is_within_2_5",  # 240
     },
     "test_load.py": {
         "test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libvips",  # 0.7
