@@ -14,12 +14,15 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from . import argyll
 from .medialib import IDENTITY, INKS, Media, apply_to_profile
+
+if TYPE_CHECKING:
+    from ..rip.profile import Profile
 
 PATCH_MM = 6.0                 # a patch's side: 4 mm measured inside a 1 mm inset
 INSET_MM = 1.0
@@ -41,7 +44,7 @@ def _quiet(_msg: str) -> None:
 class Printer:
     """Where charts print: the in-process emulator with its spectrophotometer (a real
     printer would print each chart and wait for its measurement file)."""
-    profile: object                     # the printer profile (rip/profile.py)
+    profile: Profile                    # the printer profile (rip/profile.py)
     dpi: int = 300
     passes: int = 1
     bidir: bool = False
@@ -101,9 +104,10 @@ class Printer:
         profile = profile or self.profile
         values = np.asarray(values)
         img, rects = self.chart(values, values.shape[1])
-        spectro = self.measure_dir is None
-        if not spectro:
-            stale = Path(self.measure_dir) / f"{name}.ti3"
+        measure_dir = self.measure_dir
+        spectro = measure_dir is None
+        if measure_dir is not None:
+            stale = Path(measure_dir) / f"{name}.ti3"
             stale.unlink(missing_ok=True)            # the measurement of an earlier print
         elif self.device != "emulator":
             raise ValueError(f"--device {self.device}: charts on a real printer are measured "
@@ -117,7 +121,8 @@ class Printer:
                                       ink_limit=ink_limit)
             job = RipJob(str(src), settings, profile)
             faults = Faults.parse(list(self.inject)) if self.device == "emulator" else None
-            opts = dict(spectro_path=lab_path, spectro_dpi=SPECTRO_DPI) if spectro else {}
+            opts: dict[str, Any] = dict(spectro_path=lab_path, spectro_dpi=SPECTRO_DPI) \
+                if spectro else {}
             scan_path = str(Path(tmp) / f"{name}-scan.tif")
             scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc else None)
             if scan_dpi:
@@ -134,9 +139,9 @@ class Printer:
                 self.last_scan_rgb = scan_patches(scan_path, rects, scan_dpi)
                 if self.scanner_icc is not None:
                     return xicclu(self.scanner_icc, self.last_scan_rgb / 255.0, "f")[:, :3]
-            if spectro:
+            if measure_dir is None:
                 return measure_patches(lab_path, rects, inset_mm=INSET_MM)
-            return await_measurements(Path(self.measure_dir), name, values, img, rects,
+            return await_measurements(Path(measure_dir), name, values, img, rects,
                                       self.dpi, self.wait_s, self.progress)
 
 
@@ -171,6 +176,7 @@ def scanner_profile(profile, folder: Path, patches: int = 600, seed: int = 11,
     progress(f"scanner characterisation chart: {patches} patches, spectrophotometer and scan")
     lab = pr.measure(levels, profile, name="scanner")
     rgb = pr.last_scan_rgb
+    assert rgb is not None
     xyz = lab_to_xyz(lab) * 100
     folder.mkdir(parents=True, exist_ok=True)
     lines = ["CTI3   ", "", 'DESCRIPTOR "Argyll Calibration Target chart information 3"',
@@ -588,10 +594,6 @@ def recalibrate(media: Media, profile, inject=(), progress: Progress = _quiet,
     values["build"] = {**media.values["build"], "recalibrated": {"inject": list(inject),
                                                                  "max_shift_de": shift}}
     return values
-
-
-def media_with(media: Media, **changes) -> Media:
-    return replace(media, values={**media.values, **changes})
 
 
 def lab_to_srgb8(lab: np.ndarray) -> np.ndarray:
