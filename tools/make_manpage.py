@@ -22,7 +22,10 @@ def manpage() -> str:
     page = str(Manpage(build_parser(), _data=data))
     # argparse-manpage leaves help text that wraps onto a line starting with ' (troff's
     # other control character) unescaped: \& makes such a line text
-    return "\n".join("\\&" + ln if ln.startswith("'") else ln for ln in page.split("\n"))
+    page = "\n".join("\\&" + ln if ln.startswith("'") else ln for ln in page.split("\n"))
+    # troff reads its input as Latin-1 unless told otherwise: any other character (the help
+    # texts' ΔE, °, ≤) goes in as groff's own escape, so the page is ASCII and renders anywhere
+    return "".join(ch if ord(ch) < 128 else f"\\[u{ord(ch):04X}]" for ch in page)
 
 
 def main() -> int:
