@@ -80,9 +80,17 @@ def child(state: Path, cfg: Path, samples: Path, seconds: float, replay_hz: floa
     w.link.jobsChanged.connect(lambda _v: n.__setitem__("jobs", n["jobs"] + 1))
     out = open(samples, "a", buffering=1)
     t0 = time.monotonic()
+    kinds0: list = []
+
+    def kinds():
+        from collections import Counter
+        return Counter(type(o).__name__ for o in gc.get_objects())
 
     def sample():
         gc.collect()
+        if not kinds0:
+            kinds0.append(kinds())
+            kinds0.append({id(o) for o in gc.get_objects() if type(o) is dict})
         out.write(json.dumps(dict(
             t=round(time.monotonic() - t0, 1), true=sys.getrefcount(True),
             false=sys.getrefcount(False), none=sys.getrefcount(None), rss_mb=rss_mb(),
@@ -162,6 +170,14 @@ def child(state: Path, cfg: Path, samples: Path, seconds: float, replay_hz: floa
     for t in timers:
         t.stop()
     sample()
+    grown = kinds()
+    grown.subtract(kinds0[0] if kinds0 else {})
+    from collections import Counter
+    old = kinds0[1] if len(kinds0) > 1 else set()
+    new_dicts = Counter(",".join(sorted(map(str, o))[:8]) for o in gc.get_objects()
+                        if type(o) is dict and id(o) not in old)
+    out.write(json.dumps(dict(objects_grown_by_type=dict(grown.most_common(12)),
+                              new_dicts_by_keys=dict(new_dicts.most_common(8)))) + "\n")
     w.printer_action("left", "resume", None)
     w.close()
     out.close()
@@ -298,7 +314,13 @@ def run(minutes: float, replay_hz: float, out: Path | None, keep: Path | None = 
         except subprocess.TimeoutExpired:
             proc.kill()
     samples = [json.loads(line) for line in samples_file.read_text().splitlines() if line.strip()]
+    samples_all = samples
+    grown = next((s["objects_grown_by_type"] for s in samples if "objects_grown_by_type" in s), None)
+    samples = [s for s in samples if "t" in s]
     res = summarize(samples, server_rss, rc, err, jobs, minutes, replay_hz)
+    res["objects"]["grown_by_type"] = grown
+    res["objects"]["new_dicts_by_keys"] = next((s["new_dicts_by_keys"] for s in samples_all
+                                               if "new_dicts_by_keys" in s), None)
     res["samples_data"] = samples
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
