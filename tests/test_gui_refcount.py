@@ -111,3 +111,20 @@ def test_the_gui_warns_at_start_on_the_defective_binding():
     assert "6.11.3" in binding_defect("6.12.0", (3, 11))
     assert binding_defect("6.12.0", (3, 12)) is None
     assert binding_defect("6.11.3", (3, 11)) is None
+
+
+def test_server_link_keeps_one_client_per_pool_thread(qtbot, tmp_path):
+    """One HTTP client per pool thread, as designed: on a QThreadPool PySide6 gave every
+    request a fresh Python thread state, so the thread-local client was a new Client (and
+    connection) per request, and the thread states' dicts piled up (bench/gui_soak.py:
+    ~14 a second, ~1 MB of RSS a minute)."""
+    from types import SimpleNamespace
+
+    from wideprint.app.gui.server_link import ServerLink
+    link = ServerLink(tmp_path, SimpleNamespace(host="127.0.0.1", port=9, token="t"))
+    seen = []
+    for _ in range(60):
+        link.call(lambda c: id(c), seen.append)
+    qtbot.waitUntil(lambda: len(seen) == 60, timeout=10_000)
+    link.stop()
+    assert len(set(seen)) <= 3, len(set(seen))

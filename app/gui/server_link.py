@@ -19,9 +19,10 @@ import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from PySide6.QtCore import QObject, QRunnable, QThreadPool, Signal
+from PySide6.QtCore import QObject, Signal
 
 from ..client import ApiError, Client
 
@@ -76,14 +77,12 @@ def find_or_start(state_dir: Path, device: str = "emulator", media_dir: Path | N
     raise RuntimeError(f"the print server did not answer within {timeout:.0f} s (see {logfile})")
 
 
-class _Call(QRunnable):
+class _Call:
     """fn(client) on a pool thread; its result or failure goes back through the link's
     queued signal, so the callbacks run on the UI thread."""
 
     def __init__(self, link: "ServerLink", fn, done, failed):
-        super().__init__()
         self.link, self.fn, self.done, self.failed = link, fn, done, failed
-        self.setAutoDelete(True)
 
     def run(self) -> None:
         try:
@@ -114,12 +113,13 @@ class ServerLink(QObject):
         self.state_dir = Path(state_dir)
         self._url = (client.host, client.port, client.token)
         self._local = threading.local()
-        self.pool = QThreadPool(self)
-        self.pool.setMaxThreadCount(3)
+        # Python threads, not QThreadPool: PySide6 runs each QRunnable under a new Python
+        # thread state, so the thread-local client was a new Client (and connection) per
+        # request, and their thread-state dicts piled up (bench/gui_soak.py: ~14 a second)
+        self.pool = ThreadPoolExecutor(3, thread_name_prefix="wideprint-gui-call")
         # machine commands in the order the operator gave them (spit, then cap: never the
         # other way round because two pool threads raced)
-        self.ordered = QThreadPool(self)
-        self.ordered.setMaxThreadCount(1)
+        self.ordered = ThreadPoolExecutor(1, thread_name_prefix="wideprint-gui-ordered")
         self._stop = threading.Event()
         self._events: threading.Thread | None = None
         self._resp = None
@@ -141,8 +141,11 @@ class ServerLink(QObject):
     def call(self, fn, done=None, failed=None, ordered: bool = False) -> None:
         """fn(client) on the pool; done(result) or failed(message) on the UI thread.
         `ordered`: one after the other, in the order of the calls (printer commands)."""
-        (self.ordered if ordered else self.pool).start(
-            _Call(self, fn, done, failed or self.requestFailed.emit))
+        try:
+            (self.ordered if ordered else self.pool).submit(
+                _Call(self, fn, done, failed or self.requestFailed.emit).run)
+        except RuntimeError:              # stopped (the window closing): nothing more to ask
+            pass
 
     def call_now(self, fn):
         """fn(client) on this thread (start-up, tests)."""
@@ -163,8 +166,12 @@ class ServerLink(QObject):
                 resp.close()
             except Exception:  # noqa: BLE001
                 pass
-        self.pool.waitForDone(3000)
-        self.ordered.waitForDone(3000)
+        for ex in (self.pool, self.ordered):
+            ex.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + 3
+        for ex in (self.pool, self.ordered):          # the calls running: 3 s at most
+            for t in list(getattr(ex, "_threads", ())):
+                t.join(max(0.0, deadline - time.monotonic()))
 
     def _rediscover(self) -> None:
         """The server restarted (another port): read server.json again."""
