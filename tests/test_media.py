@@ -17,8 +17,16 @@ from wideprint.rip.color import DEFAULT_OUTPUT_ICC, default_output_icc
 
 ROOT = Path(__file__).resolve().parent.parent
 HAVE_ARGYLL = shutil.which("colprof") is not None and (argyll.REF_DIR / "sRGB.icm").is_file()
-needs_argyll = pytest.mark.skipif(not HAVE_ARGYLL, reason="ArgyllCMS (argyll, argyll-ref) "
-                                  "is not installed")
+needs_argyll = pytest.mark.usefixtures("argyll_installed")
+
+
+@pytest.fixture
+def argyll_installed():
+    """ArgyllCMS is a set-up dependency (resources/debian-packages.txt; .ci/run installs it):
+    its absence fails the test loudly, never skips it."""
+    if not HAVE_ARGYLL:
+        pytest.fail("ArgyllCMS is not installed: apt-get install argyll argyll-ref "
+                    "(resources/debian-packages.txt)")
 
 
 @pytest.fixture

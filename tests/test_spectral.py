@@ -237,7 +237,8 @@ def test_measure_patches_averages_in_xyz():
 def test_ti3_is_read_by_argyll(tmp_path, flat, profile):
     """Argyll's colverify reads two .ti3 files and compares them patch by patch."""
     if shutil.which("colverify") is None:
-        pytest.skip("ArgyllCMS is not installed (apt-get install argyll)")
+        pytest.fail("ArgyllCMS is not installed: apt-get install argyll "
+                    "(resources/debian-packages.txt; .ci/run installs it)")
     covs, planes, (_, lab, dpi, _) = flat
     got = measure_patches(lab, patch_rects(len(covs), profile), dpi, inset_mm=1.5)
     device = np.array(covs) * 100
