@@ -108,7 +108,8 @@ def check_at_start(state_dir: Path) -> None:
 
 
 # -- serve --check ------------------------------------------------------------------------------
-def _digest(path: Path) -> str:
+def file_digest(path: str | os.PathLike) -> str:
+    """A spool copy's SHA-256, read a MiB at a time (the digest taken when it was queued)."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         while chunk := f.read(1 << 20):
@@ -146,7 +147,7 @@ def check(state_dir: Path) -> dict:
             p = Path(r["spool_path"])
             if not p.exists():
                 out["missing"].append(dict(id=r["id"], name=r["name"], path=str(p)))
-            elif p.stat().st_size != r["size"] or _digest(p) != r["sha256"]:
+            elif p.stat().st_size != r["size"] or file_digest(p) != r["sha256"]:
                 out["damaged"].append(dict(id=r["id"], name=r["name"], path=str(p)))
     for p in spool_files(spool_dir):
         if str(p) in used:
@@ -196,7 +197,7 @@ def repair(state_dir: Path) -> dict:
                 result["skipped"].append(dict(path=str(p), why="no description beside it "
                                               "(spooled by an older version): submit it again"))
                 continue
-            if p.stat().st_size != desc.get("size") or _digest(p) != desc.get("sha256"):
+            if p.stat().st_size != desc.get("size") or file_digest(p) != desc.get("sha256"):
                 result["skipped"].append(dict(path=str(p), why="its content is not the one "
                                               "queued (SHA-256 differs)"))
                 continue

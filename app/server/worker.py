@@ -649,19 +649,15 @@ class Worker(threading.Thread):
         """The spool copies checked against the digests taken when they were queued
         (docs/server.md "Crash recovery"): a copy changed on disk since fails its job,
         naming the file, instead of printing something nobody sent."""
-        import hashlib
         for j in (job, *members):
             path = j.get("spool_path")
             if not path:
                 return f"{j['name']}: its spooled copy is gone"
-            h = hashlib.sha256()
             try:
-                with open(path, "rb") as f:
-                    while chunk := f.read(1 << 20):
-                        h.update(chunk)
+                digest = fsck.file_digest(path)
             except OSError as exc:
                 return f"{j['name']}: its spooled copy {path} cannot be read ({exc.strerror})"
-            if h.hexdigest() != j["sha256"]:
+            if digest != j["sha256"]:
                 return (f"{j['name']}: its spooled copy {path} is damaged (its SHA-256 is not "
                         f"the one taken when it was queued); submit the file again")
         return ""
