@@ -42,6 +42,7 @@ from .ports import ApiHost  # what it sees of the server (core.py composes it)
 from .previews import PREVIEW_PX, THUMB_PX
 from .spool import STATES, SpoolError
 from .validate import Invalid, _check_int, validate_job_request
+from . import web
 
 log = logging.getLogger("wideprint.server")
 # every log line of the server's loggers: names shown escaped, tokens taken out (safe_text)
@@ -169,6 +170,20 @@ class _Reader(io.RawIOBase):
         if h._raw is not None and len(h._raw) < RAW_HEAD_LIMIT:
             h._raw += memoryview(b)[:n]
         return n
+
+
+def token_identity(operator_token: str | None, users: Users | None, token: str
+                   ) -> Identity | None:
+    """Whose token this is: the operator's (the `token` file), a user's (`users/NAME`), or
+    nobody's (None).  An empty or short token is nobody's, whatever the files say; every
+    comparison takes constant time."""
+    if len(token) < MIN_TOKEN or not token.isascii():
+        return None
+    mine = operator_token or ""
+    if len(mine) >= MIN_TOKEN and hmac.compare_digest(token.encode(), mine.encode()):
+        return Identity(None, OPERATOR)
+    name = users.lookup(token) if users is not None else None
+    return Identity(name, USER) if name else None
 
 
 # -- the API ----------------------------------------------------------------------------------
@@ -404,18 +419,21 @@ class ApiHandler(BaseHTTPRequestHandler):
         or a user's (`users/NAME`).  An empty or short token is nobody's, whatever the
         files say; every comparison takes constant time."""
         values = self.headers.get_all("Authorization") or []
+        if not values:                 # the web page's session cookie (web.py, docs/web.md)
+            sessions = getattr(self.server, "sessions", None)
+            sid = web.parse_cookie(self.headers.get_all("Cookie") or [])
+            found = sessions.identity(sid, self.command, self.headers,
+                                      self.headers.get("Host")) if sessions and sid else None
+            return found[0] if found else None
         if len(values) != 1:
             return None
         scheme, _, token = values[0].partition(" ")
-        token = token.strip()
-        if scheme.lower() != "bearer" or len(token) < MIN_TOKEN or not token.isascii():
+        if scheme.lower() != "bearer":
             return None
-        mine = self.srv.token or ""
-        if len(mine) >= MIN_TOKEN and hmac.compare_digest(token.encode(), mine.encode()):
-            return Identity(None, OPERATOR)
-        users = getattr(self.server, "users", None)
-        name = users.lookup(token) if users is not None else None
-        return Identity(name, USER) if name else None
+        return self._token_identity(token.strip())
+
+    def _token_identity(self, token: str) -> Identity | None:
+        return token_identity(self.srv.token, getattr(self.server, "users", None), token)
 
     def _operator_only(self, what: str) -> None:
         if not self.who.operator:
@@ -515,6 +533,8 @@ class ApiHandler(BaseHTTPRequestHandler):
     def _dispatch(self, method: str) -> None:
         url = urlsplit(self.path)
         parts = [p for p in url.path.split("/") if p]
+        if url.path in web.STATIC or url.path in web.SESSION_ROUTES:
+            return self._web(method, url.path)
         who = self._identity()
         if who is None:
             # nothing of an unauthorised request is read; the connection is closed
@@ -705,6 +725,64 @@ class ApiHandler(BaseHTTPRequestHandler):
             return self._error(500, f"internal error: {type(exc).__name__}: {exc}", close=True,
                                quiet=True)
 
+    def _web(self, method: str, path: str) -> None:
+        """The shop's web page (web.py, docs/web.md): its files (no login needed: they hold
+        no data), and `/login`, `/session`, `/logout`."""
+        extra = dict(web.SECURITY_HEADERS)
+        try:
+            self._length = self._body_length()
+            self._body_left = self._length or 0
+            if path in web.STATIC:
+                if method != "GET" or self._length:
+                    raise Invalid(f"{path} is a page: GET it", 405 if method != "GET" else 400)
+                page = web.static_file(path)
+                assert page is not None
+                return self._send(200, page[0], page[1], extra=extra)
+            sessions = self.server.sessions
+            sid = web.parse_cookie(self.headers.get_all("Cookie") or [])
+            host = self.headers.get("Host")
+            if path == "/session" and method == "GET":
+                found = sessions.identity(sid, "GET", self.headers, host)
+                if found is None:
+                    return self._json(401, {"error": "not signed in"}, extra=extra)
+                who, s = found
+                return self._json(200, {"name": who.name, "role": who.role, "csrf": s.csrf},
+                                  extra=extra)
+            if method != "POST" or path == "/session":
+                raise Invalid(f"{path}: POST it", 405)
+            if path == "/logout":
+                self._read_json()
+                if sessions.identity(sid, "POST", self.headers, host) is not None:
+                    sessions.logout(sid)
+                extra["Set-Cookie"] = web.cookie("", clear=True)
+                return self._json(200, {"signed_out": True}, extra=extra)
+            # /login: JSON only (a cross-site form cannot send it without a preflight) and
+            # from this origin; throttled per address; a wrong token gets nothing
+            ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+            if ctype != "application/json":
+                raise Invalid("send the login as application/json", 415)
+            if not web.same_origin(self.headers, host):
+                raise Invalid("a login from another site's page is refused", 403)
+            address = self.client_address[0]
+            if sessions.throttled(address):
+                raise Invalid(f"too many wrong logins from {address}: wait "
+                              f"{int(web.LOGIN_WINDOW_S / 60)} minutes", 429)
+            body = self._read_json()
+            if not isinstance(body, dict) or set(body) - {"token", "name"}:
+                raise Invalid('expected {"token": TOKEN, "name": YOUR NAME}')
+            made = sessions.login(address, body.get("token"), body.get("name"))
+            if made is None:
+                log.info("api %s: a web login with a wrong token", address)
+                return self._json(401, {"error": "wrong token"}, extra=extra)
+            sid, s, who = made
+            log.info("api %s: %s signed in to the web page", address, who.shown())
+            extra["Set-Cookie"] = web.cookie(sid)
+            return self._json(200, {"name": who.name, "role": who.role, "csrf": s.csrf},
+                              extra=extra)
+        except (Invalid, ValueError) as exc:
+            status = exc.status if isinstance(exc, Invalid) else 400
+            return self._error(status, str(exc), close=bool(self._body_left))
+
     def _submit(self) -> None:
         srv = self.srv
         try:
@@ -876,6 +954,7 @@ class _HTTPServer(socketserver.TCPServer):
             add_secret(getattr(srv, "token", "") or "")
             self.users = Users(srv.state_dir, getattr(srv, "token", None))
             self.owners = Owners(srv.spool)
+            self.sessions = web.Sessions(lambda t: token_identity(srv.token, self.users, t))
         self.max_connections = max(1, int(max_connections))
         self.max_heavy = max(1, self.max_connections - self.max_connections // 4)
         self._busy = _busy_answer(self.max_connections)
