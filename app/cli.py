@@ -173,7 +173,9 @@ def cmd_rip(args) -> int:
         from .media_cli import job_settings
         profile, settings = job_settings(args, _profile(args))
         _check_icc(settings)
-        _check_output_folders(output=args.output)
+        _check_output_folders(output=args.output, preview=args.preview)
+        if args.proof and not args.preview:
+            raise ValueError("--proof: the proof is written as --preview PNG; give both")
     except (ValueError, OSError) as exc:
         print(f"wideprint rip: {shown(exc)}", file=sys.stderr)
         return EXIT_USAGE
@@ -193,10 +195,44 @@ def cmd_rip(args) -> int:
     finally:
         if job is not None:
             job.close()
+    say = sys.stderr if _is_stdout(args.output) else sys.stdout      # -o /dev/stdout
     print(f"{shown(args.output)}: {job.width} x {job.height} dots at {job.settings.dpi} x "
           f"{job.dpi_y:.1f} dpi, drops C {dots[0]} M {dots[1]} Y {dots[2]} K {dots[3]}",
-          file=sys.stderr if _is_stdout(args.output) else sys.stdout)   # -o /dev/stdout
+          file=say)
+    if args.preview and args.proof:
+        return EXIT_OK if _proof(args.file, args.preview, settings, profile, {}, say) \
+            else EXIT_JOB_FAILED
+    if args.preview:
+        from ..rip.planes import write_preview
+        try:
+            write_preview(args.output, args.preview)
+        except (OSError, ValueError) as exc:
+            print(f"wideprint rip: preview not written: {shown(exc)}", file=sys.stderr)
+            return EXIT_JOB_FAILED
     return EXIT_OK
+
+
+def _proof(f: str, png: str, settings, profile, rep: dict, say) -> bool:
+    """`--preview PNG --proof`: the soft proof of file `f` through its media profile with
+    the gamut warning (app/softproof.py), and its out-of-gamut share in the report."""
+    from ..rip.load import ImageError
+    from .jobpreview import proof_job
+    from .softproof import GAMUT_DE2000, write_proof
+    try:
+        proof = proof_job(f, settings, profile)
+        write_proof(proof, png)
+    except (ImageError, ValueError, OSError) as exc:
+        why = f"{exc.strerror} ({png})" if isinstance(exc, OSError) and exc.strerror \
+            else str(exc)
+        rep["preview_error"] = why
+        print(f"{shown(f, NAME_LIMIT)}: proof not written: {shown(why)}", file=sys.stderr)
+        return False
+    rep.update(preview=png, proof_icc=proof.media_icc, out_of_gamut=proof.share)
+    gamut = "not checked (device colours)" if proof.share is None else \
+        f"{100 * proof.share:.1f} % of the image out of gamut (ΔE2000 > {GAMUT_DE2000:g})"
+    print(f"{shown(f, NAME_LIMIT)}: proof {shown(png)} through {shown(proof.media_icc)}: {gamut}",
+          file=say)
+    return True
 
 
 def _is_stdout(path: str) -> bool:
@@ -291,6 +327,8 @@ def cmd_print(args) -> int:
         faults = Faults.parse(args.inject)
         _check_icc(settings)
         _check_scan(args)
+        if args.proof and not args.preview:
+            raise ValueError("--proof: the proof is written as --preview PNG; give both")
         if args.spectro_out and not SPECTRO_DPI[0] <= args.spectro_dpi <= SPECTRO_DPI[1]:
             raise ValueError(f"--spectro-dpi {args.spectro_dpi}: must be "
                              f"{SPECTRO_DPI[0]}..{SPECTRO_DPI[1]}")
@@ -303,7 +341,8 @@ def cmd_print(args) -> int:
     if args.inject and not emulator:
         return refuse(EXIT_USAGE, f"--inject needs an emulated device (--device emulator, "
                       f"emulator-usb or emulator-pci), not {args.device}")
-    only_emulator = [o for o, v in (("--media-out", args.media_out), ("--preview", args.preview),
+    only_emulator = [o for o, v in (("--media-out", args.media_out),
+                                    ("--preview", args.preview and not args.proof),
                                     ("--event-log", args.event_log), ("--vcd", args.vcd),
                                     ("--latched-out", args.latched_out),
                                     ("--scan-out", args.scan_out),
@@ -319,7 +358,7 @@ def cmd_print(args) -> int:
     scans: dict[int, str | None] = {}
     spectros: dict[int, str | None] = {}
     scratch = tempfile.TemporaryDirectory(prefix="wideprint-") \
-        if args.preview and not args.media_out else None
+        if args.preview and not args.media_out and not args.proof else None
     try:
         scan = dict(scan_path=lambda job: scans.get(job), scan_dpi=args.scan_dpi) \
             if args.scan_out else {}
@@ -444,7 +483,11 @@ def cmd_print(args) -> int:
                     from ..rip.layout import layout_line
                     rep["files"] = [f, *extras[i]]
                     print(f"{shown(f, NAME_LIMIT)}: {layout_line(rep['layout'])}", file=say)
-                if args.preview:
+                if args.preview and args.proof:
+                    if not _proof(f, _media_path(args.preview, i, len(files)) or args.preview,
+                                  settings, profile, rep, say):
+                        failed += 1
+                elif args.preview:
                     from ..rip.planes import write_preview
                     preview = _media_path(args.preview, i, len(files))
                     try:
@@ -671,7 +714,7 @@ def cmd_completion(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from . import devices
     from .. import __version__
-    from .media_cli import add_media_option, add_parser as add_media_parser
+    from .media_cli import add_parser as add_media_parser
     ap = argparse.ArgumentParser(prog="wideprint", description="RIP and driver for the "
                                  "3.4 m CMYK solvent printer (8 x Xaar XJ128), with its emulator.")
     ap.add_argument("--version", action="version", version=f"wideprint {__version__}")
@@ -687,6 +730,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="emulator only: write the printed media (with several files: -N suffix or {job})")
     p.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
     p.add_argument("--preview", metavar="PNG", help="emulator only: a PNG picture of the media")
+    p.add_argument("--proof", action="store_true",
+                   help="--preview is the soft proof instead (any device): the job as its media "
+                   "prints it, through the media's ICC profile, out-of-gamut areas striped "
+                   "grey; the report gives the share out of gamut (docs/color.md)")
     p.add_argument("--report", metavar="JSON", help="write the job reports")
     p.add_argument("--json", action="store_true", help="print the job reports as JSON")
     p.add_argument("--event-log", metavar="JSONL", help="emulator event log")
@@ -701,7 +748,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spectro-dpi", type=int, default=50, metavar="N",
                    help="resolution of --spectro-out (default 50: a 0.5 mm aperture; 10..300)")
     _rip_options(p)
-    add_media_option(p)
     p.set_defaults(func=cmd_print)
 
     p = sub.add_parser("rip", help="write the halftone planes the RIP intends")
@@ -711,8 +757,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="8bit: one byte per dot and ink, read by any TIFF reader (default); "
                    "packed: one bit per dot and ink, 8x less to compress, read by tifffile, "
                    "libtiff and wideprint but not PIL or libvips (docs/formats.md)")
+    p.add_argument("--preview", metavar="PNG", help="a PNG picture of the planes")
+    p.add_argument("--proof", action="store_true",
+                   help="--preview is the soft proof instead: the job as its media prints it, "
+                   "out-of-gamut areas striped grey (docs/color.md)")
     _rip_options(p)
-    add_media_option(p)
     p.set_defaults(func=cmd_rip)
 
     p = sub.add_parser("gui", help="the operator GUI (PySide6), a client of this machine's print "

@@ -43,6 +43,7 @@ class PreviewData:
     exact: bool = False                   # dots are the RIP's halftone, dot for dot
     seconds: float = 0.0
     warnings: list = field(default_factory=list)
+    out_of_gamut: float | None = None     # share of the image the media cannot print (softproof.py)
 
 
 def _vips_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray | None:
@@ -146,6 +147,7 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
         mirror = bool(rs.placement.mirror)
         quarter = rotate in (90, 270)
         from ..rip.inputs import sniff_input
+        gamut = None
         if job.layout is not None:
             dots, desc, warnings, resampled = _layout_preview(job, pw, ph, copies, max_px, cancelled)
         elif sniff_input(path) != "image":
@@ -165,6 +167,10 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
                     raise InterruptedError
                 ink = sep.convert(small)
                 dots = Halftoner(rs.dither, pw, channels=4).process(np.ascontiguousarray(ink))
+                from .softproof import proof_image      # the estimate's out-of-gamut share
+                gamut = proof_image(small, src.colorspace, src.depth, embedded_icc=src.icc,
+                                    input_icc=rs.input_icc, output_icc=rs.output_icc,
+                                    intent=rs.intent, ink_limit=job.ink_limit).share
                 desc = (f"{src.width} × {src.height} px {src.colorspace.upper() if src.colorspace != 'grey' else 'grey'} "
                         f"{src.depth}-bit {(src.format or '').upper()}").strip()
                 warnings = list(getattr(sep, "warnings", []))
@@ -179,7 +185,8 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
         return PreviewData(path=path, width_dots=W, height_rows=H, width_mm=width_mm,
                            height_mm=height_mm, dpi=rs.dpi, total_strokes=total, dots=dots,
                            estimate=est, source_desc=desc, exact=exact,
-                           seconds=time.monotonic() - t0, warnings=warnings)
+                           seconds=time.monotonic() - t0, warnings=warnings,
+                           out_of_gamut=gamut)
     finally:
         job.close()
 
@@ -284,3 +291,39 @@ def render_separations(dots: np.ndarray, enabled) -> np.ndarray:
     if mask.all():
         return render_rgb(dots)
     return render_rgb(dots * mask)
+
+
+def proof_job(path: str, rs, profile, max_px: int = 2000):
+    """The soft proof (app/softproof.py) of a whole job (RipSettings `rs`, its media already
+    resolved into the settings and the profile), at most `max_px` on its longer side, placed
+    as it prints."""
+    from ..rip.inputs import sniff_input
+    from .softproof import proof_cmyk, proof_image
+    job = RipJob(path, rs, profile)
+    try:
+        k = profile.k(rs.dpi)
+        width_mm = job.width * k / profile.counts_per_inch * 25.4
+        height_mm = job.height * profile.row_um / 1000.0
+        pw, ph = preview_size(width_mm, height_mm, job.width, job.height, max_px)
+        if job.layout is not None:
+            raise ValueError("soft proof: layouts (nest, step and repeat, tiles) are proofed "
+                             "item by item: proof each file")
+        if sniff_input(path) != "image":
+            small = _band_reduce(job.source, pw, ph)
+            if getattr(job.source, "prescreened", False):
+                raise ValueError("soft proof: an RTL file's dots are already halftoned")
+            ink = Separator("cmyk", 8, ink_limit=job.ink_limit).convert(   # the RIP's limit
+                np.ascontiguousarray(small[..., :4]))
+            return proof_cmyk(ink, rs.output_icc)
+        src = open_image(path)
+        try:
+            quarter = int(rs.placement.rotate) in (90, 270)
+            small = reduce_image(src, *((ph, pw) if quarter else (pw, ph)))
+            small = place_array(small, int(rs.placement.rotate), bool(rs.placement.mirror))
+            return proof_image(small, src.colorspace, src.depth, embedded_icc=src.icc,
+                               input_icc=rs.input_icc, output_icc=rs.output_icc,
+                               intent=rs.intent, ink_limit=job.ink_limit)
+        finally:
+            src.close()
+    finally:
+        job.close()

@@ -1,5 +1,5 @@
 """`wideprint media list|show|create|verify|recalibrate|remove|export|import` and the
-`--media NAME` option of `print` and `rip` (docs/media.md)."""
+job settings of `print` and `rip` with `--media NAME` (docs/media.md)."""
 
 from __future__ import annotations
 
@@ -12,28 +12,12 @@ from pathlib import Path
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 
-def add_media_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--media", metavar="NAME", help="print with this media (`wideprint media "
-                   "list`): its ICC output profile, ink limits, linearisation and print mode "
-                   "(options given win); default: the shipped media for RGB and grey")
-
-
 def job_settings(args, profile):
-    """(profile, RipSettings) of a job: with --media, the media's ink limit, curves and
-    drop budget in the profile, its print mode under the options given and its ICC as
-    the output profile (unless --output-icc)."""
+    """(profile, RipSettings) of a job from the command line: with --media (a setting of
+    the schema, rip/settings.py), the media applied by `medialib.resolve`."""
     from ..rip.settings import from_mapping, mapping_from_args
-    from .medialib import apply_to_profile, find
-    given = mapping_from_args(args)
-    name = getattr(args, "media", None)
-    if not name:
-        return profile, from_mapping(given, profile)
-    media = find(name)
-    if not media.icc_path.is_file():
-        raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
-    mapping = {**media.settings_defaults(), **given}
-    mapping = {"output_icc": str(media.icc_for(int(mapping["dpi"]))), **mapping}
-    profile = apply_to_profile(media, profile, int(mapping["dpi"]))
+    from .medialib import resolve
+    profile, mapping = resolve(mapping_from_args(args), profile)
     return profile, from_mapping(mapping, profile)
 
 

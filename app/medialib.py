@@ -139,12 +139,16 @@ def check_values(values: dict, where: str = "media") -> dict:
 
 
 # -- the library ---------------------------------------------------------------------------
-def user_dir() -> Path:
+def user_dir(state_dir: Path | None = None) -> Path:
+    """The user's media library: $WIDEPRINT_MEDIA_DIR, else STATE/media of `state_dir` (a
+    print server's own state directory), else of the default state directory."""
     env = os.environ.get("WIDEPRINT_MEDIA_DIR")
     if env:
         return Path(env)
-    from .server.config import default_state_dir
-    return default_state_dir() / "media"
+    if state_dir is None:
+        from .server.config import default_state_dir
+        state_dir = default_state_dir()
+    return Path(state_dir) / "media"
 
 
 def check_name(name: str) -> str:
@@ -164,19 +168,20 @@ def load(folder: Path, shipped: bool = False) -> Media:
     return Media(folder, values, shipped)
 
 
-def find(name: str) -> Media:
-    """The entry called `name`: the user's, else the shipped one."""
+def find(name: str, library: Path | None = None) -> Media:
+    """The entry called `name`: the user's (in `library`, default `user_dir()`), else the
+    shipped one."""
     check_name(name)
-    for base, shipped in ((user_dir(), False), (SHIPPED, True)):
+    for base, shipped in ((library or user_dir(), False), (SHIPPED, True)):
         if (base / name / ENTRY_FILE).is_file():
             return load(base / name, shipped)
-    have = ", ".join(m.name for m in list_media()) or "none"
+    have = ", ".join(m.name for m in list_media(library)) or "none"
     raise ValueError(f"no media {name!r} (have: {have}; `wideprint media list`)")
 
 
-def list_media() -> list[Media]:
+def list_media(library: Path | None = None) -> list[Media]:
     seen: dict[str, Media] = {}
-    for base, shipped in ((user_dir(), False), (SHIPPED, True)):
+    for base, shipped in ((library or user_dir(), False), (SHIPPED, True)):
         if not base.is_dir():
             continue
         for d in sorted(base.iterdir()):
@@ -260,6 +265,24 @@ def import_(archive: Path, name: str | None = None, replace_existing: bool = Fal
 
 
 # -- applying a media to a job ---------------------------------------------------------------
+def resolve(mapping: dict, profile, library: Path | None = None) -> tuple[Any, dict]:
+    """(printer profile, settings mapping) of a job whose settings name a `media`: the
+    media's print mode under the settings given (given ones win), its ICC as the output
+    profile unless one is given, and its ink limit, curves and drop budget in the profile
+    (docs/media.md "A job's media").  The one place the command line and the print server
+    turn a media name into what the RIP uses.  Without a media: both unchanged."""
+    name = mapping.get("media")
+    if not name:
+        return profile, mapping
+    media = find(name, library)
+    if not media.icc_path.is_file():
+        raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
+    given = {k: v for k, v in mapping.items() if v is not None}
+    out = {**media.settings_defaults(), **given}
+    out.setdefault("output_icc", str(media.icc_for(int(out["dpi"]))))
+    return apply_to_profile(media, profile, int(out["dpi"])), out
+
+
 def apply_to_profile(media: Media, profile, dpi: int | None = None):
     """The printer profile with the media's ink limit, curves and drop budget; for a dpi
     mode of the entry's `modes`, that mode's curves and budget."""

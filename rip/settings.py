@@ -158,6 +158,10 @@ SETTINGS: tuple[Setting, ...] = (
             minimum=1, maximum=400, label="Ink limit", metavar="PERCENT"),
     Setting("input_icc", str, None, "input ICC profile (overrides the file's embedded one)",
             nullable=True, label="Input ICC profile", metavar="ICC"),
+    Setting("media", str, None, "print with this media (`wideprint media list`): its ICC output "
+            "profile, ink limits, linearisation and print mode (settings given win); default: "
+            "the printer profile's, with the shipped media's profile for RGB and grey",
+            nullable=True, label="Media", metavar="NAME"),
     Setting("output_icc", str, None, "output CMYK ICC profile of the printer and media",
             nullable=True, label="Output ICC profile", metavar="ICC"),
     Setting("intent", str, "relative", "ICC rendering intent", choices=INTENTS,
@@ -492,6 +496,7 @@ class RipSettings:
     pass_mask: str = "checker"
     ink_limit: float | None = None
     input_icc: str | None = None
+    media: str | None = None     # the media entry the job was resolved with (app/medialib.py)
     output_icc: str | None = None
     intent: str = "relative"
     band_rows: int = 64          # rows per band: 64 keeps a 40,000 px wide job small

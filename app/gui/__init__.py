@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         gs.save(config_dir / SETTINGS_FILE)
     state_dir = Path(args.state_dir) if args.state_dir else default_state_dir()
     try:
-        client, proc = find_or_start(state_dir, gs.device_spec, media_dir=state_dir / "media")
+        client, proc = find_or_start(state_dir, gs.device_spec, media_dir=state_dir / "printed")
     except RuntimeError as exc:
         print(f"wideprint gui: {exc}", file=sys.stderr)
         QMessageBox.critical(None, "wideprint", str(exc))

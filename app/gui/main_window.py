@@ -128,8 +128,11 @@ class EstimateBox(QGroupBox):
             d["area"].setText(_m2(part["area_m2"]))
             d["ink"].setText(f"{fmt_ml(part['ink_total_ml'])} ml")
             d["cmyk"].setText(" / ".join(fmt_ml(x) for x in part["ink_ml"]))
+        gamut = e.get("out_of_gamut")
         self.note.setText(note or (f"{e['source']}; {e['width_dots']:,} × {e['height_rows']:,} dots at "
-                                   f"{e['dpi']} dpi; ink from the preview's halftone"))
+                                   f"{e['dpi']} dpi; ink from the preview's halftone"
+                                   + (f"; {100 * gamut:.1f} % out of the media's gamut"
+                                      if gamut is not None else "")))
 
     def show_accounting(self, job: dict, prints: list[dict]) -> None:
         """What a finished job took (the server's accounting, one row per copy printed)."""

@@ -22,13 +22,14 @@ from ...rip.settings import SETTINGS, SettingsError
 MIXED = object()                  # several jobs, several values
 MIXED_TEXT = "— mixed —"
 SECTIONS = (("Printing", ("dpi", "passes", "bidir", "pass_mask", "dither")),
-            ("Colour", ("intent", "ink_limit", "input_icc", "output_icc")),
+            ("Colour", ("media", "intent", "ink_limit", "input_icc", "output_icc")),
             ("Size and position", ("size", "width_mm", "height_mm", "scale", "fit_width_mm",
                                    "rotate", "mirror", "filter", "align", "x_mm", "margin_mm",
                                    "top_mm")),
             ("PDF and PostScript", ("page_box", "pages", "page_gap_mm")))
 UNITS = {"ink_limit": "%", "scale": "×"}
-AUTO = {"ink_limit": "profile's", "input_icc": "embedded, else sRGB", "output_icc": "built-in CMYK",
+AUTO = {"media": "printer's default",
+        "ink_limit": "profile's", "input_icc": "embedded, else sRGB", "output_icc": "built-in CMYK",
         "width_mm": "auto", "height_mm": "auto", "scale": "1", "fit_width_mm": "off",
         "margin_mm": "profile's"}
 # job fields beside the settings: (key, label, minimum, maximum)

@@ -19,7 +19,7 @@ import threading
 from collections import OrderedDict
 from pathlib import Path
 
-from .validate import Invalid, rip_settings, with_icc_paths
+from .validate import Invalid, job_rip_settings
 
 log = logging.getLogger("wideprint.server")
 
@@ -63,10 +63,11 @@ class Previews:
         path = job.get("spool_path")
         if not path or not os.path.exists(path):
             raise Invalid(f"job {job['id']}: its file is no longer spooled (no preview)", 410)
-        settings = with_icc_paths(job["settings"], self.srv.state_dir / "icc")
         with self._one:
             try:
-                pd = compute_preview(path, rip_settings(settings), self._profile(job),
+                rs, profile = job_rip_settings(job["settings"], self._profile(job),
+                                               self.srv.state_dir)
+                pd = compute_preview(path, rs, profile,
                                      copies=job["copies"], max_px=px)
             except (ImageError, ValueError, OSError) as exc:
                 raise Invalid(str(exc).replace(path, job["name"]), 422) from None
@@ -122,6 +123,7 @@ class Previews:
                     width_mm=pd.width_mm, height_mm=pd.height_mm, dpi=pd.dpi,
                     strokes=pd.total_strokes, stroke_s=e.stroke_s, source=pd.source_desc,
                     exact=pd.exact, warnings=list(pd.warnings), copies=copies,
+                    out_of_gamut=pd.out_of_gamut,
                     per_copy=per_copy, all_copies=all_copies,
                     preview_px=[int(pd.dots.shape[1]), int(pd.dots.shape[0])])
 

@@ -67,6 +67,12 @@ def validate_settings(raw, profile, icc_dir: Path | None = None) -> dict:
                           f"icc/ folder)") from None
         if icc_dir is not None and not (icc_dir / v).is_file():
             raise Invalid(f"{key} {v!r}: no such profile in {icc_dir}")
+    if out.get("media"):
+        from ..medialib import find, user_dir
+        try:                       # icc_dir is STATE/icc: the server's library is STATE/media
+            find(out["media"], user_dir(icc_dir.parent) if icc_dir is not None else None)
+        except ValueError as exc:
+            raise Invalid(f"media: {exc}") from None
     return out
 
 
@@ -84,6 +90,15 @@ def rip_settings(settings: dict):
     """RipSettings from validated settings (placement given as a JSON object)."""
     from ...rip.settings import from_mapping
     return from_mapping(settings)
+
+
+def job_rip_settings(settings: dict, profile, state_dir: Path):
+    """(RipSettings, printer profile) a job rips with: its ICC names as paths in STATE/icc,
+    its media (STATE/media, docs/media.md) applied to the settings and the profile."""
+    from ..medialib import resolve, user_dir
+    profile, mapping = resolve(with_icc_paths(settings, Path(state_dir) / "icc"), profile,
+                               user_dir(state_dir))
+    return rip_settings(mapping), profile
 
 
 JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer"}

@@ -15,7 +15,7 @@ import time
 from . import crashpoints, fsck
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .spool import COLORS, disk_full
-from .validate import rip_settings, with_icc_paths
+from .validate import job_rip_settings
 
 log = logging.getLogger("wideprint.server")
 
@@ -411,8 +411,10 @@ class Worker(threading.Thread):
         if length:
             from ...rip.layout import plan_layout
             try:
-                plan = plan_layout([j["spool_path"] for j in group], rip_settings(first["settings"]),
-                                   self.profile, self.paper_mm)
+                rs, media_profile = job_rip_settings(first["settings"], self.profile,
+                                                     self.srv.state_dir)
+                plan = plan_layout([j["spool_path"] for j in group], rs, media_profile,
+                                   self.paper_mm)
                 if plan.height_mm >= length:
                     return group
             except (ValueError, OSError):
@@ -494,7 +496,6 @@ class Worker(threading.Thread):
                             strokes_total=job["strokes_total"], strokes_printed=job["strokes_done"],
                             resumed=resumed)
         self.printer_state = "printing"
-        settings = with_icc_paths(job["settings"], self.srv.state_dir / "icc")
         first = True
         layout = None
         while job["copies_done"] < job["copies"]:
@@ -519,7 +520,9 @@ class Worker(threading.Thread):
                              self._print_row(job, copy, started, None, "failed", damaged, resumed))
                 return
             try:
-                rip = RipJob(job["spool_path"], rip_settings(settings), self.profile,
+                rs, media_profile = job_rip_settings(job["settings"], self.profile,
+                                                     self.srv.state_dir)
+                rip = RipJob(job["spool_path"], rs, media_profile,
                              more=tuple(m["spool_path"] for m in members),
                              names=(job["name"], *(m["name"] for m in members)))
                 layout = rip.layout.report if rip.layout is not None else None
