@@ -324,6 +324,11 @@ def cmd_print(args) -> int:
     try:
         from .media_cli import job_settings
         profile, settings = job_settings(args, _profile(args))
+        if args.cut_out:                        # print and cut (docs/cut.md)
+            from ..rip.cut import wants_cut_marks
+            from ..rip.cutfile import cut_format
+            cut_format(args.cut_out)
+            settings = wants_cut_marks(settings)
         faults = Faults.parse(args.inject)
         _check_icc(settings)
         _check_scan(args)
@@ -427,6 +432,17 @@ def cmd_print(args) -> int:
                 failed += 1
                 reports.append(job_failed(f, str(exc), dict(job_id=job_id)))
                 continue
+            cut_report = None
+            if args.cut_out:                    # before printing: a file without cut paths is said
+                from ..rip.cut import write_job_cut
+                try:
+                    cut_report = write_job_cut(str(_media_path(args.cut_out, i, len(files))), rip,
+                                               settings, profile)
+                except (ValueError, OSError) as exc:
+                    rip.close()
+                    failed += 1
+                    reports.append(job_failed(f, f"cut file: {exc}", dict(job_id=job_id)))
+                    continue
             label = f"{i + 1}/{len(files)} {shown(Path(f).name, 60)}" \
                 + (f" +{len(extras[i])} nested" if extras[i] else "")
 
@@ -447,6 +463,12 @@ def cmd_print(args) -> int:
             run = run_job(dev, rip, job_id, on_event=on_event, internal_errors=True,
                           on_job=lambda job: current.__setitem__("job", job))
             rep = dict(run.report, job_id=job_id)
+            if cut_report is not None:
+                rep["cut"] = cut_report
+                print(f"{shown(f, NAME_LIMIT)}: cut file {shown(cut_report['file'])}: "
+                      f"{cut_report['paths']} path{'s' if cut_report['paths'] != 1 else ''}, "
+                      f"{cut_report['length_mm'] / 1000:.3f} m, {cut_report['marks']} marks",
+                      file=say)
             if run.state == "cancelled":
                 progress(0, 1, "", final=True)
                 failed += 1
@@ -741,6 +763,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="structured job log: states, strokes, status, recoveries (JSON lines)")
     _emulator_outputs(p)
     _scan_options(p, several=True)
+    p.add_argument("--cut-out", metavar="CUT.plt",
+                   help="print and cut: write the paths drawn in a cut spot colour (CutContour, "
+                   "...) as a cut file, .plt/.hpgl (HP-GL/2) or .dxf, in the printed sheet's "
+                   "millimetres; turns on --marks cut unless other marks are asked for "
+                   "(docs/cut.md; with several files: -N suffix or {job})")
     p.add_argument("--spectro-out", metavar="LAB.tif",
                    help="emulator only: the print measured by a spectrophotometer, float32 "
                    "CIELAB (D50, 2°, M0) over the image area (docs/physical.md); with several "

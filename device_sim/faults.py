@@ -43,6 +43,8 @@ KINDS = {
                        "drying clock (a long pause in a short test, docs/emulator.md)",
     "dry-nozzle": "HEAD:NOZZLE that has dried (misfires until spat or purged; repeatable)",
     "clogged-nozzle": "HEAD:NOZZLE that has clogged (misfires until purged; repeatable)",
+    "skew": "the paper travels at this angle to the feed axis (0.2deg; positive: the print runs "
+            "to the right down the sheet; docs/physical.md)",
     "seed": "random seed for the injected faults and the scanner's noise",
     "boot": "the power-up number JOB_STATUS reports (default: drawn at random at power-up; "
             "docs/protocol.md 2.10)",
@@ -121,6 +123,7 @@ class Faults:
     idle_time_scale: float = 1.0
     dry_nozzle: list = field(default_factory=list)       # [(head name, nozzle)]
     clogged_nozzle: list = field(default_factory=list)   # [(head name, nozzle)]
+    skew: float = 0.0                                    # degrees (docs/physical.md)
     seed: int = 1
     boot: int | None = None                              # power-up number (None: random)
 
@@ -155,6 +158,10 @@ class Faults:
                         f.feed_error = Length.parse(value)
                         if f.feed_error.unit == "col":
                             raise ValueError(value)
+                elif attr == "skew":
+                    f.skew = float(value.strip().lower().removesuffix("deg").removesuffix("°"))
+                    if not abs(f.skew) <= 5:
+                        raise ValueError(value)
                 elif attr == "misdirect":
                     head, nozzle, off = value.split(":", 2)
                     xy = _xy(off) if "=" in off else (Length(0.0), Length.parse(off))

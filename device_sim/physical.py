@@ -55,6 +55,16 @@ class JobGeometry:
     bidir_um: float           # reverse drops land this far left
     nozzle_dx_um: np.ndarray  # (heads, nozzles) misdirection
     nozzle_dy_um: np.ndarray
+    skew_rad: float = 0.0     # the paper travels at this angle (--inject skew)
+
+    def skewed(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Drops on paper that travels at an angle to the feed axis (docs/physical.md,
+        "Skew"): the paper walks sideways as it feeds, so on the sheet the print is turned
+        about its first dot, `y tan` further right at `y` down the sheet."""
+        if not self.skew_rad:
+            return x, y
+        c, s = math.cos(self.skew_rad), math.sin(self.skew_rad)
+        return x * c + y * s, y * c - x * s
 
     def static_dx_um(self, head: int, forward: bool) -> np.ndarray:
         """(nozzles,) the static x error of each nozzle of a head in this direction."""
@@ -117,7 +127,7 @@ class PhysicalModel:
             ndx[index[name], nozzle] += dx.um(col_um, row_um)
             ndy[index[name], nozzle] += dy.um(col_um, row_um)
         return JobGeometry(x0, k, y0, row_nm, width, height, count_um, col_um, row_um, hdx, hdy,
-                           _length_um(f.bidir_error, col_um, row_um), ndx, ndy)
+                           _length_um(f.bidir_error, col_um, row_um), ndx, ndy, math.radians(f.skew))
 
     def feed_error_um(self, travel_um: float, row_um: float) -> float:
         """The paper's extra travel on a feed of `travel_um` (docs/physical.md)."""
@@ -152,4 +162,5 @@ class PhysicalModel:
         x = (base + dyn_counts) * geo.count_um + geo.static_dx_um(head, forward)[z]
         y = (paper_um + (self.slots[head, z] + 0.5 - geo.y0) * geo.row_um
              + geo.static_dy_um(head)[z])
+        x, y = geo.skewed(x, y)                     # the paper's own travel, not in the media
         return x, y

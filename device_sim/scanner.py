@@ -167,8 +167,14 @@ class Scanner:
         self.pix = 25_400.0 / self.dpi
         self.margin_px = int(round(MARGIN_UM / self.pix))
         self.margin_um = self.margin_px * self.pix
-        self.width = int(math.ceil(geo.width * geo.col_um / self.pix)) + 2 * self.margin_px
-        self.height = int(math.ceil(geo.height * geo.row_um / self.pix)) + 2 * self.margin_px
+        # skewed paper turns the print and a longer feed stretches it: the field grows so
+        # that the sheet's whole print is on the glass (docs/physical.md, "Skew")
+        sk = abs(math.sin(getattr(geo, "skew_rad", 0.0)))
+        w_um, h_um = geo.width * geo.col_um, geo.height * geo.row_um
+        self.pad_x_um = math.ceil(h_um * sk / self.pix) * self.pix if geo.skew_rad < 0 else 0.0
+        self.width = int(math.ceil(w_um / self.pix)) + 2 * self.margin_px + int(math.ceil(h_um * sk / self.pix))
+        self.height = int(math.ceil((h_um * (1 + max(faults.feed_error_fraction, 0.0)) + w_um * sk) / self.pix)) \
+            + 2 * self.margin_px
         self.grey = faults.scan_mode == "grey"
         self.seed = faults.seed
         self.noise = float(faults.scan_noise)
@@ -215,7 +221,7 @@ class Scanner:
     def sheet_px(self, x_um, y_um) -> tuple[np.ndarray, np.ndarray]:
         """Image-frame micrometres -> the sheet's pixel coordinates (before the scanner's
         geometry; pixel centres on integers)."""
-        return ((np.asarray(x_um) + self.margin_um) / self.pix - 0.5,
+        return ((np.asarray(x_um) + self.margin_um + self.pad_x_um) / self.pix - 0.5,
                 (np.asarray(y_um) + self.margin_um) / self.pix - 0.5)
 
     def paper_to_scan(self, x_um, y_um) -> tuple[np.ndarray, np.ndarray]:

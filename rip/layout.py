@@ -141,6 +141,7 @@ class Plan:
     grid: _Grid
     marks_kind: str = "none"
     report: dict = field(default_factory=dict)
+    cut_marks: Any = None            # marks "cut": the cutter's MarkLayout (rip/regmarks.py)
 
     @property
     def width_mm(self) -> float:
@@ -173,6 +174,9 @@ class Plan:
             cx, cy = x + w // 2 - lx // 2, y + h // 2 - ly // 2
             for mx, my in ((cx, y - oy - ly), (cx, y + h + oy), (x - ox - lx, cy), (x + w + ox, cy)):
                 out.append(Mark(mx, my, lx, ly, ALL_INKS, "target", draw))
+        if self.marks_kind == "cut":                 # squares a contour cutter finds (docs/cut.md)
+            out += [Mark(mx, my, mw, mh, K, "cut")
+                    for mx, my, mw, mh, _ in self.cut_marks.rects(x, y, w, h, g.cols, g.rows)]
         for axis, at in s.joins:                     # tiles: where the neighbour's edge goes
             if axis == "x":
                 c = x + min(max(at, 0), w - tc)
@@ -260,6 +264,12 @@ def plan_layout(paths, settings: RipSettings, profile, paper_mm: float | None = 
     zone = pl.marks != "none" or (tiles and pl.join_marks)
     mx = g.cols(MARK_OFFSET_MM) + g.cols(MARK_LENGTH_MM) if zone else 0
     my = g.rows(MARK_OFFSET_MM) + g.rows(MARK_LENGTH_MM) if zone else 0
+    cut_marks = None
+    if pl.marks == "cut":                            # the cutter's marks set the frame
+        from .regmarks import MarkLayout
+        cut_marks = MarkLayout(spacing_mm=pl.cut_mark_spacing_mm)
+        cx, cy = cut_marks.frame(g.cols, g.rows)
+        mx, my = (max(mx, cx), max(my, cy)) if tiles and pl.join_marks else (cx, cy)
     lr = g.rows(LABEL_GAP_MM + LABEL_MM) if (pl.label or tiles) else 0
     gx, gy = g.cols(pl.gap_mm), g.rows(pl.gap_mm)
 
@@ -341,7 +351,7 @@ def plan_layout(paths, settings: RipSettings, profile, paper_mm: float | None = 
         shelves = 1
     width = max(s.box[0] + s.box[2] for s in slots)
     height = max(s.box[1] + s.box[3] for s in slots)
-    plan = Plan(width, height, slots, mode, g, pl.marks)
+    plan = Plan(width, height, slots, mode, g, pl.marks, cut_marks=cut_marks)
     plan.report = _report(plan, paths, sizes, box_wh, gy, avail, shelves, when,
                           _paper_mm(settings, profile, paper_mm))
     return plan

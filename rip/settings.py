@@ -31,7 +31,7 @@ FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kerne
 ROTATIONS = (0, 90, 180, 270)                                    # degrees clockwise
 ALIGNS = ("left", "center", "right")
 PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page boxes (docs/documents.md)
-MARKS = ("none", "crop", "registration")                           # layout marks (docs/layout.md)
+MARKS = ("none", "crop", "registration", "cut")                    # layout marks (docs/layout.md, cut.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
 TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align", "bidir-scan",
                  "heads-scan", "feed-scan", "wedge-scan")
@@ -246,7 +246,11 @@ SETTINGS: tuple[Setting, ...] = (
             group="placement", section="layout", label="Join marks"),
     Setting("marks", str, "none", "crop marks, or crop and registration marks, outside each "
             "image", group="placement", section="layout", choices=MARKS, label="Marks",
-            labels={"none": "None", "crop": "Crop marks", "registration": "Crop + registration"}),
+            labels={"none": "None", "crop": "Crop marks", "registration": "Crop + registration",
+                    "cut": "Cutter registration marks"}),
+    Setting("cut_mark_spacing_mm", float, 500.0, "marks cut: a pair of cutter registration marks "
+            "at least every this many mm along the print (docs/cut.md)", group="placement",
+            section="layout", minimum=20.0, maximum=100_000.0, label="Cut mark spacing", metavar="MM"),
     Setting("label", bool, False, "a job label under each image: name, date, settings",
             group="placement", section="layout", label="Job label"),
 )
@@ -331,7 +335,8 @@ class Placement:
     tile_height_mm: float | None = None
     tile_overlap_mm: float = 0.0
     join_marks: bool = False  # tiles: ticks where the neighbour's edge goes
-    marks: str = "none"  # none | crop | registration
+    marks: str = "none"  # none | crop | registration | cut (a contour cutter's, docs/cut.md)
+    cut_mark_spacing_mm: float = 500.0  # marks cut: a pair at least this often along the print
     label: bool = False  # the job label under each image
 
     def check(self) -> None:

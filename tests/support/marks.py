@@ -168,6 +168,11 @@ SLOW: dict[str, set[str] | str] = {
         "test_only_the_application_knows_the_emulator",  # 1.5
         "test_rip_imports_no_driver_no_emulator_no_app",  # 1.0
     },
+    "test_cut.py": {
+        "test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour",  # 60
+        "test_cut_file_path_equals_the_pdf_path_on_the_sheet",  # 20 (the decal fixture: two prints)
+        "test_registration_marks_are_k_only_where_the_cut_file_says",  # 0.1 (or the fixture)
+    },
     "test_layout.py": {
         "test_cli_nests_different_images_in_one_job_and_reports_the_media_saved",  # 1.0
         "test_registration_marks_and_label_lie_outside_the_image",  # 1.2
@@ -255,6 +260,16 @@ SLOW: dict[str, set[str] | str] = {
     "test_spectral.py": {
         "test_observer_matches_colour_science",  # 0.8
         "test_flat_patches_equal_the_model",  # 17.9
+    },
+    "test_spot.py": {
+        "test_printed_spots_measure_within_2_de2000_and_the_cut_line_drops_nothing",  # 3.0
+        "test_pdf_spots_print_their_recipes_and_others_their_alternate",  # 2.7
+        "test_postscript_spots_go_the_same_way",  # 1.9
+        "test_a_cut_line_neither_prints_nor_knocks_out",  # 1.1
+        "test_a_document_without_library_or_cut_colours_is_not_rewritten",  # 0.9
+        "test_swatch_book_round_trip",  # 0.8
+        "test_cli_import_export_round_trip_and_name_matching",  # 0.8
+        "test_resolution_through_the_media_profile_reports_the_gamut",  # 0.7
     },
     "test_standalone.py": ALL,  # 4 s in all
     "test_state_dir.py": {

@@ -1,0 +1,227 @@
+"""Print and cut (issue 35, docs/cut.md): cut paths from a PDF's CutContour, the HP-GL/2 and
+DXF cut files, the cutter's registration marks, and a camera cutter finding the marks on
+the scan of a 3 m print with feed error and skew."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pikepdf
+import pytest
+
+from wideprint.app import api
+from wideprint.rip.cutfile import read_dxf, read_hpgl
+from wideprint.rip.cutnames import is_cut_name
+from wideprint.rip.profile import load_profile
+
+sys.path.insert(0, str(Path(__file__).parent / "support"))
+import cutter  # noqa: E402
+
+PT = 25.4 / 72.0                      # mm per point
+ROW_UM = load_profile().row_um
+
+
+def make_pdf(path: Path, w_pt: float, h_pt: float, content: str, cut_alt=(0, 1, 0, 0)) -> None:
+    """A one-page PDF whose resource CS0 is a Separation named CutContour (alternate CMYK
+    `cut_alt` at tint 1, as a designer's software writes it)."""
+    pdf = pikepdf.new()
+    fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0], C1=list(cut_alt), N=1)
+    cs = pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/CutContour"), pikepdf.Name.DeviceCMYK,
+                        pdf.make_indirect(fn)])
+    form = pdf.make_stream(b"/CS0 CS 1 SCN 0.5 w 0 0 m 20 0 l 20 10 l S",
+                           Type=pikepdf.Name.XObject, Subtype=pikepdf.Name.Form, BBox=[0, 0, 50, 50],
+                           Resources=pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(CS0=cs)))
+    res = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(CS0=cs), XObject=pikepdf.Dictionary(Fm0=form))
+    page = pikepdf.Dictionary(Type=pikepdf.Name.Page, MediaBox=[0, 0, w_pt, h_pt], Resources=res,
+                              Contents=pdf.make_stream(content.encode()))
+    pdf.pages.append(pikepdf.Page(page))
+    pdf.save(path)
+
+
+def bezier(p0, p1, p2, p3, n=4000) -> np.ndarray:
+    t = np.linspace(0, 1, n)[:, None]
+    u = 1 - t
+    return (u ** 3 * np.array(p0) + 3 * u * u * t * np.array(p1) + 3 * u * t * t * np.array(p2)
+            + t ** 3 * np.array(p3))
+
+
+def seg_dist(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Each point's distance to the polyline."""
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    best = np.full(len(points), np.inf)
+    for i in range(0, len(points), 2000):
+        p = points[i:i + 2000, None, :]
+        t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-18), 0, 1)
+        q = a + t[..., None] * d
+        best[i:i + 2000] = np.sqrt(((p - q) ** 2).sum(-1)).min(axis=1)
+    return best
+
+
+def wideprint(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "wideprint.app.cli", *args], capture_output=True, text=True,
+                          timeout=600)
+
+
+# the decal: a K shape, and around it a CutContour with straight and curved parts (points)
+H_PT = 200.0
+CUT = [("m", (20, 20)), ("l", (140, 20)), ("c", (170, 20), (180, 60), (150, 90)),
+       ("c", (120, 120), (60, 180), (30, 150)), ("l", (20, 20))]
+
+
+def cut_ops() -> str:
+    out = []
+    for op, *pts in CUT:
+        out.append(" ".join(f"{x} {y}" for x, y in pts) + f" {op}")
+    return " ".join(out) + " h"
+
+
+def true_path_mm(scale: float, x0_mm: float, y0_mm: float) -> np.ndarray:
+    """The CutContour as the sheet should have it: points -> mm, y down from the page top."""
+    pts, cur = [], None
+    for op, *p in CUT:
+        if op == "m":
+            cur = p[0]
+        elif op == "l":
+            pts.append(np.linspace(cur, p[0], 2000))
+            cur = p[0]
+        else:
+            pts.append(bezier(cur, *p))
+            cur = p[-1]
+    pdf = np.vstack(pts)
+    return np.stack([x0_mm + pdf[:, 0] * PT * scale, y0_mm + (H_PT - pdf[:, 1]) * PT * scale], axis=1)
+
+
+@pytest.fixture(scope="module")
+def decal(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cut")
+    pdf = d / "decal.pdf"
+    make_pdf(pdf, 200, H_PT, f"/CS0 CS 1 SCN 0.3 w {cut_ops()} S 0 0 0 1 k 50 50 60 40 re f\n"
+             "q 1 0 0 1 150 150 cm /Fm0 Do Q\n")
+    runs = {}
+    for ext in ("plt", "dxf"):
+        run = wideprint("print", str(pdf), "--dpi", "150", "--scale", "1.5", "--cut-out", str(d / f"decal.{ext}"),
+                        "--media-out", str(d / f"media-{ext}.tif"), "--report", str(d / f"rep-{ext}.json"))
+        assert run.returncode == 0, run.stderr
+        runs[ext] = json.loads((d / f"rep-{ext}.json").read_text())[0]
+    return d, runs
+
+
+def frame_mm(dpi: int) -> tuple[float, float]:
+    """The slot's frame for the cutter's marks (docs/cut.md): offset + side, on the grid."""
+    cols = round(3.0 / 25.4 * dpi) * 2
+    rows = round(3.0 * 1000 / ROW_UM) * 2
+    return cols * 25.4 / dpi, rows * ROW_UM / 1000
+
+
+def test_cut_names_are_the_conventional_ones():
+    for name in ("CutContour", "cutcontour", "Thru-cut", "CutPath", "KissCut", "Die-line", "DieCut"):
+        assert is_cut_name(name), name
+    for name in ("Cyan", "PANTONE 485 C", "Brand Red", "Cutter"):
+        assert not is_cut_name(name), name
+    assert is_cut_name("Contour", ["contour"]) and not is_cut_name("CutContour", ["contour"])
+
+
+@pytest.mark.parametrize("ext", ["plt", "dxf"])
+def test_cut_file_path_equals_the_pdf_path_on_the_sheet(decal, ext):
+    d, runs = decal
+    lines, marks = (read_hpgl if ext == "plt" else read_dxf)(str(d / f"decal.{ext}"))
+    assert runs[ext]["cut"]["paths"] == 2 and len(lines) == 2
+    fx, fy = frame_mm(150)
+    want = true_path_mm(1.5, fx, fy)
+    main = max(lines, key=len)
+    assert np.allclose(main[0], main[-1])                                 # closed
+    there = seg_dist(main, want[::1])                    # the file's vertices on the true path
+    back = seg_dist(want, main)                          # the true path on the file's polyline
+    assert there.max() <= 0.05 and back.max() <= 0.05, (there.max(), back.max())
+    assert len(main) > 30                                # the curves were flattened, not cut short
+    # the form XObject's path, through its placement (cm) and the form's own resources
+    form = min(lines, key=len)
+    exp = np.array([[150, 150], [170, 150], [170, 160]], float)
+    exp_mm = np.stack([fx + exp[:, 0] * PT * 1.5, fy + (H_PT - exp[:, 1]) * PT * 1.5], axis=1)
+    assert np.abs(form - exp_mm).max() <= 0.05
+    assert len(marks) == 4
+
+
+def test_registration_marks_are_k_only_where_the_cut_file_says(decal):
+    d, runs = decal
+    media = api.read_planes(d / "media-plt.tif")
+    _, marks = read_hpgl(str(d / "decal.plt"))
+    dpi, col, row = 150, 25.4 / 150, ROW_UM / 1000
+    fx, fy = frame_mm(dpi)
+    w_mm, h_mm = 200 * PT * 1.5, H_PT * PT * 1.5
+    place = {p: (x, y) for p, x, y in marks}
+    # documented places: 3 mm squares, 3 mm clear of the graphic, at its corners
+    for name, ex, ey in (("L0", fx - 4.5, fy - 4.5), ("R0", fx + w_mm + 4.5, fy - 4.5),
+                      ("L1", fx - 4.5, fy + h_mm + 4.5), ("R1", fx + w_mm + 4.5, fy + h_mm + 4.5)):
+        x, y = place[name]
+        assert abs(x - ex) <= col and abs(y - ey) <= row, (name, x, y, ex, ey)
+    # on the media: the K dots outside the graphic are exactly four squares at those centres
+    gx0, gy0 = round(fx / col), round(fy / row)
+    outside = media[..., 3].astype(bool)
+    outside[gy0:gy0 + round(h_mm / row) + 1, gx0:gx0 + round(w_mm / col) + 1] = False
+    n, _, stats, cents = cv2.connectedComponentsWithStats(outside.astype(np.uint8), connectivity=8)
+    assert n - 1 == 4
+    for (_x, _y, w, h, area), (cx, cy) in zip(stats[1:], cents[1:]):
+        assert area == w * h and abs(w * col - 3.0) <= col and abs(h * row - 3.0) <= row
+        mx, my = (cx + 0.5) * col, (cy + 0.5) * row
+        assert min(np.hypot(mx - px, my - py) for px, py in place.values()) <= 0.5 * col
+    # K only: no C, M or Y outside the graphic (the marks are not registration colour)
+    cmy = media[..., :3].any(axis=2)
+    cmy[gy0:gy0 + round(h_mm / row) + 1, gx0:gx0 + round(w_mm / col) + 1] = False
+    assert not cmy.any()
+
+
+W_MM, L_MM = 40.0, 3000.0
+
+
+def long_contour() -> str:
+    """A closed contour 3 m long: a straight side, the other of cubic waves, curved ends."""
+    mm = 1 / PT
+    p = [f"{5 * mm:.3f} {(L_MM - 5) * mm:.3f} m", f"{5 * mm:.3f} {5 * mm:.3f} l",
+         f"{5 * mm:.3f} 0 {30 * mm:.3f} 0 {30 * mm:.3f} {10 * mm:.3f} c"]
+    y, k = 10.0, 0
+    while y + 250 <= L_MM - 10 + 1e-9:
+        a = 6.0 if k % 2 == 0 else -6.0
+        p.append(f"{(30 + a) * mm:.3f} {(y + 250 / 3) * mm:.3f} {(30 + a) * mm:.3f} "
+                 f"{(y + 500 / 3) * mm:.3f} {30 * mm:.3f} {(y + 250) * mm:.3f} c")
+        y, k = y + 250, k + 1
+    p += [f"{30 * mm:.3f} {(L_MM - 10) * mm:.3f} l",
+          f"{30 * mm:.3f} {L_MM * mm:.3f} {5 * mm:.3f} {L_MM * mm:.3f} {5 * mm:.3f} {(L_MM - 5) * mm:.3f} c h"]
+    return " ".join(p)
+
+
+def test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour(tmp_path):
+    """3 m print, 0.3 % feed error and 0.2 degree skew: the marks found on the scan correct
+    the cut path onto the contour printed as a 0.4 mm K line (measured where the line is on
+    the scan), within 0.25 mm everywhere; uncorrected it is millimetres off."""
+    pdf = tmp_path / "banner.pdf"
+    c = long_contour()
+    # the cut line's alternate is no ink, so the scan shows only the K contour line
+    make_pdf(pdf, W_MM / PT, L_MM / PT, f"/CS0 CS 1 SCN 0.3 w {c} S\n0 0 0 1 K {0.4 / PT:.4f} w {c} S\n",
+             cut_alt=(0, 0, 0, 0))
+    run = wideprint("print", str(pdf), "--dpi", "300", "--cut-out", str(tmp_path / "cut.plt"),
+                    "--scan-out", str(tmp_path / "scan.tif"), "--scan-dpi", "300",
+                    "--inject", "feed-error=0.3%", "--inject", "skew=0.2deg")
+    assert run.returncode == 0, run.stderr
+    lines, marks = read_hpgl(str(tmp_path / "cut.plt"))
+    assert len(marks) == 16                              # 8 pairs: a pair at least every 500 mm
+    dark, pix = cutter.load_scan(str(tmp_path / "scan.tif"))
+    found = cutter.find_marks(dark, pix, marks, 3.0)
+    path = cutter.resample(lines[0], 0.5)                # a point every 0.5 mm of the 6 m contour
+    err = cutter.measure_on_print(dark, cutter.correct(path, found), pix)
+    assert not np.isnan(err).any()                       # the printed line is under every point
+    assert err.max() <= 0.25, err.max()
+    # the injection is real: the first pair alone (no correction along the length) is far off
+    first = cutter.Found(found.centres_px[:2], found.nominal_mm[:2], pix)
+    end = path[path[:, 1] > L_MM - 100]
+    sim, _ = cv2.estimateAffinePartial2D(first.nominal_mm[:, None].astype(np.float32),
+                                         first.centres_px[:, None].astype(np.float32))
+    naive = end @ sim[:, :2].T + sim[:, 2]
+    corrected = cutter.correct(end, found)
+    assert np.hypot(*(naive - corrected).T).max() * pix > 8.0      # 0.3 % of 3 m, 0.2 deg: ~9-10 mm
