@@ -798,6 +798,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_gui)
 
     add_media_parser(sub)         # media list|show|create|verify|recalibrate|remove|export|import
+    from .spot_cli import add_parser as add_spot_parser
+    add_spot_parser(sub)          # spot list|show|import|export|remove|forget|swatch|pick (docs/spot.md)
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report

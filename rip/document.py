@@ -25,6 +25,8 @@ from .ghostscript import GsPage, colour_args, probe, render_page
 from .load import ImageError
 from .place import _reband, place
 from .settings import MAX_SIDE, MM_PER_INCH, Placement, parse_pages
+from .spot_render import SpotPlan
+from .spot_render import prepare as prepare_spots
 
 __all__ = ["DocumentSource", "open_document"]
 
@@ -77,6 +79,8 @@ class DocumentSource:
         self.warnings = list(warnings)
         self.page_count = page_count
         self._closed = False
+        self.spots: list[dict] = []             # docs/spot.md "The job's report"
+        self.spot_plan: SpotPlan | None = None  # its private rewritten copy, removed on close
 
     @property
     def dtype(self) -> np.dtype:
@@ -118,6 +122,8 @@ class DocumentSource:
         self._closed = True
         for _, src in self.pages:
             src.close()
+        if self.spot_plan is not None:
+            self.spot_plan.close()
 
     def __enter__(self) -> "DocumentSource":
         return self
@@ -171,9 +177,14 @@ def open_document(path: str, fmt: str, settings, profile) -> DocumentSource:
     pl: Placement = settings.placement
     dpi, row_um = settings.dpi, profile.row_um
     _check_icc(settings)
-    all_pages, warnings = probe(path, fmt, pl.page_box)
+    seen: dict[str, str] = {}
+    all_pages, warnings = probe(path, fmt, pl.page_box, spots=seen)
     chosen = select_pages(path, all_pages, pl.pages)
     colour = colour_args(settings.input_icc, settings.output_icc, settings.intent)
+    # spot colours (docs/spot.md): library colours print their recipes, cut colours never
+    # print; a document with neither renders from the original file, as before
+    plan = prepare_spots(path, fmt, settings, seen)
+    render_path, render_fmt = plan.path, plan.fmt
     turn = replace(pl, size="pixels", width_mm=None, height_mm=None, scale=None, fit_width_mm=None)
     placed = []
     try:
@@ -189,13 +200,16 @@ def open_document(path: str, fmt: str, settings, profile) -> DocumentSource:
                 raise ImageError(path, f"page {page.number} would be {wide:.0f} mm wide on the media, more than the "
                                        f"printer's {limit:.0f} mm: scale it (--width-mm, --scale) or turn it "
                                        f"(--rotate 90)")
-            src = _PageSource(path, fmt, page, pw, ph, xres, yres, colour)
+            rpage = replace(page, flags=()) if render_fmt != fmt else page    # distilled: MediaBox
+            src = _PageSource(render_path, render_fmt, rpage, pw, ph, xres, yres, colour)
             placed.append((page, place(src, turn, dpi, row_um)))
         gap = int(round(float(pl.page_gap_mm) * 1000.0 / row_um)) if len(placed) > 1 else 0
         doc = DocumentSource(path, fmt, placed, gap, dpi, row_um, warnings, len(all_pages))
+        doc.spots, doc.spot_plan = plan.spots, plan
     except BaseException:
         for _, s in placed:
             s.close()
+        plan.close()
         raise
     if doc.height > MAX_SIDE:
         doc.close()

@@ -327,7 +327,12 @@ def _probe_args(path: str, fmt: str, nonce: str) -> list[str]:
                 "(\\n) print flush } for quit")
         return [*common, "-dNODISPLAY", f"--permit-file-read={path}", f"-sWPFile={path}", "-c", prog]
     hook = (f"<< /EndPage {{ exch pop 2 ne {{ ({nonce} page ) print currentpagedevice /PageSize get "
-            "{ =only ( ) print } forall (\\n) print flush false } { false } ifelse } bind >> setpagedevice")
+            "{ =only ( ) print } forall (\\n) print flush false } { false } ifelse } bind >> setpagedevice "
+            # the spot colours the program sets (docs/spot.md): Separation and DeviceN names
+            f"/setcolorspace {{ dup type /arraytype eq {{ dup length 1 gt {{ dup 0 get dup /Separation eq "
+            f"{{ pop ({nonce} spot separation ) print dup 1 get =only (\\n) print }} {{ /DeviceN eq "
+            f"{{ dup 1 get {{ ({nonce} spot devicen ) print =only (\\n) print }} forall }} if }} ifelse }} if }} if "
+            "//setcolorspace } bind def")
     args = [*common, "-sDEVICE=nullpage", "-r72"]
     if fmt == "eps":
         args.append("-dEPSCrop")
@@ -380,8 +385,11 @@ def _pdf_page(number: int, fields: str, box: str) -> GsPage:
     return GsPage(number, w, h, used, (flag,) if flag else (), dict(boxes), rot, uu)
 
 
-def probe(path: str, fmt: str, box: str = "crop") -> tuple[list[GsPage], list[str]]:
-    """Every page's size, without rasterising anything.  Returns (pages, warnings)."""
+def probe(path: str, fmt: str, box: str = "crop",
+          spots: dict[str, str] | None = None) -> tuple[list[GsPage], list[str]]:
+    """Every page's size, without rasterising anything.  Returns (pages, warnings).
+    PostScript/EPS: the Separation and DeviceN names the program sets are added to `spots`
+    (name -> "separation" | "devicen"; docs/spot.md); a PDF's are read by rip/spot_pdf.py."""
     nonce = "WP" + secrets.token_hex(8)
     cpu = _limit_s("WIDEPRINT_GS_PROBE_S", PROBE_CPU_S)
     gs = _Gs(path, _probe_args(path, fmt, nonce), cpu, stream_stdout=False)
@@ -400,6 +408,10 @@ def probe(path: str, fmt: str, box: str = "crop") -> tuple[list[GsPage], list[st
                     count = int(ln.split()[1])
                 except (IndexError, ValueError):
                     count = None
+            elif ln.startswith("spot ") and spots is not None:
+                parts = ln.split(None, 2)
+                if len(parts) == 3 and parts[2] not in ("None", "All"):
+                    spots.setdefault(parts[2], parts[1])
             elif ln.startswith("page "):
                 parts = ln.split(None, 2)
                 if fmt == "pdf":

@@ -261,6 +261,16 @@ SLOW: dict[str, set[str] | str] = {
         "test_observer_matches_colour_science",  # 0.8
         "test_flat_patches_equal_the_model",  # 17.9
     },
+    "test_spot.py": {
+        "test_printed_spots_measure_within_2_de2000_and_the_cut_line_drops_nothing",  # 3.0
+        "test_pdf_spots_print_their_recipes_and_others_their_alternate",  # 2.7
+        "test_postscript_spots_go_the_same_way",  # 1.9
+        "test_a_cut_line_neither_prints_nor_knocks_out",  # 1.1
+        "test_a_document_without_library_or_cut_colours_is_not_rewritten",  # 0.9
+        "test_swatch_book_round_trip",  # 0.8
+        "test_cli_import_export_round_trip_and_name_matching",  # 0.8
+        "test_resolution_through_the_media_profile_reports_the_gamut",  # 0.7
+    },
     "test_standalone.py": ALL,  # 4 s in all
     "test_state_dir.py": {
         "test_a_lost_database_is_refused_and_the_spool_kept",  # 0.7
