@@ -257,6 +257,10 @@ class Client:
         return self.request("GET", f"/v1/jobs/{job_id}/preview.png" + (f"?px={px}" if px else ""),
                             binary=True)
 
+    def cut_file(self, job_id: int, fmt: str = "plt") -> bytes:
+        """A print-and-cut job's cut file: "plt" (HP-GL/2) or "dxf" (docs/cut.md)."""
+        return self.request("GET", f"/v1/jobs/{job_id}/cut.{fmt}", binary=True)
+
     def media_png(self, printer: str) -> bytes:
         """An emulated printer's media as it lands (the job printing or the last one)."""
         return self.request("GET", f"/v1/printers/{printer}/media.png", binary=True)

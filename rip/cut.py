@@ -438,3 +438,26 @@ def write_job_cut(path: str, rip, settings, profile, patterns: Iterable[str] | N
     return dict(file=path, format=fmt, paths=len(job.paths), length_mm=round(length, 3),
                 marks=len(job.marks), width_mm=round(job.width_mm, 3), height_mm=round(job.height_mm, 3),
                 names=sorted({p.name for p in job.paths}), chord_mm=CHORD_MM)
+
+
+#: the cut files a print server keeps for a job (docs/cut.md, "Through the print server")
+SERVER_CUT_FILES = ("cut.plt", "cut.dxf")
+
+
+def server_cut_path(state_dir, job_id: int, name: str) -> str:
+    """Where the print server keeps a job's cut file `name` (one of SERVER_CUT_FILES)."""
+    return os.path.join(os.fspath(state_dir), "cut", f"{int(job_id)}-{name}")
+
+
+def write_cut_files(state_dir, job_id: int, rip, settings, profile) -> dict:
+    """A server job's cut files, HP-GL/2 and DXF, from one extraction; the `cut` report."""
+    from .cutfile import write_cut_file
+    plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
+    files = [rip.path, *getattr(rip, "more", ())]
+    job = cut_job(files if plan is not None else rip.path, settings, profile, None, plan)
+    os.makedirs(os.path.join(os.fspath(state_dir), "cut"), exist_ok=True)
+    for name in SERVER_CUT_FILES:
+        path = server_cut_path(state_dir, job_id, name)
+        write_cut_file(path + ".tmp" + os.path.splitext(name)[1], job)
+        os.replace(path + ".tmp" + os.path.splitext(name)[1], path)
+    return dict(paths=len(job.paths), marks=len(job.marks), files=list(SERVER_CUT_FILES))

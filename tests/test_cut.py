@@ -225,3 +225,31 @@ def test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour(tmp_path)
     naive = end @ sim[:, :2].T + sim[:, 2]
     corrected = cutter.correct(end, found)
     assert np.hypot(*(naive - corrected).T).max() * pix > 8.0      # 0.3 % of 3 m, 0.2 deg: ~9-10 mm
+
+
+def test_print_server_keeps_the_cut_files_with_the_job(decal, print_server):
+    """A job with placement marks cut: its HP-GL/2 and DXF cut files are fetched from the
+    server's API, the same paths and marks as `wideprint print --cut-out` writes."""
+    from wideprint.app.client import ApiError, Client
+    d, _ = decal
+    srv = print_server()
+    c = Client(srv.state_dir)
+    try:
+        job = c.submit(d / "decal.pdf", settings={"dpi": 150, "placement": {"scale": 1.5, "marks": "cut"}})["job"]
+        plain = c.submit(d / "decal.pdf", settings={"dpi": 150})["job"]
+        assert c.wait(job["id"], timeout=120)["state"] == "done"
+        assert c.wait(plain["id"], timeout=120)["state"] == "done"
+        for ext, read in (("plt", read_hpgl), ("dxf", read_dxf)):
+            got = d / f"server.{ext}"
+            got.write_bytes(c.cut_file(job["id"], ext))
+            lines, marks = read(str(got))
+            want, want_marks = read(str(d / f"decal.{ext}"))
+            assert len(lines) == len(want) == 2
+            for a, b in zip(sorted(lines, key=len), sorted(want, key=len)):
+                assert a.shape == b.shape and np.abs(a - b).max() < 1e-6
+            assert np.allclose([m[1:] for m in marks], [m[1:] for m in want_marks])
+        with pytest.raises(ApiError) as err:
+            c.cut_file(plain["id"], "plt")
+        assert err.value.status == 404 and "not a print-and-cut job" in str(err.value)
+    finally:
+        c.close()

@@ -674,6 +674,18 @@ class ApiHandler(BaseHTTPRequestHandler):
                     if job is None:
                         raise Invalid(f"no job {job_id}", 404)
                     return self._json(200, self._job(job))
+                if method == "GET" and len(route) == 3 and route[2] in ("cut.plt", "cut.dxf"):
+                    from ...rip.cut import server_cut_path        # print and cut (docs/cut.md)
+                    if self.srv.spool.get(job_id) is None:
+                        raise Invalid(f"no job {job_id}", 404)
+                    try:
+                        with open(server_cut_path(self.srv.state_dir, job_id, route[2]), "rb") as fh:
+                            data = fh.read()
+                    except FileNotFoundError:
+                        raise Invalid(f"job {job_id} has no cut file: it is not a print-and-cut job "
+                                      f"(placement marks cut) or has not been ripped yet", 404) from None
+                    return self._send(200, data, "application/vnd.hp-hpgl" if route[2] == "cut.plt"
+                                      else "image/vnd.dxf")
                 if method == "PATCH" and len(route) == 2:
                     self._may_act(job_id, "edit")
                     return self._json(200, self._job(self.srv.edit(job_id, body)))

@@ -172,6 +172,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour",  # 60
         "test_cut_file_path_equals_the_pdf_path_on_the_sheet",  # 20 (the decal fixture: two prints)
         "test_registration_marks_are_k_only_where_the_cut_file_says",  # 0.1 (or the fixture)
+        "test_print_server_keeps_the_cut_files_with_the_job",  # 36
     },
     "test_layout.py": {
         "test_cli_nests_different_images_in_one_job_and_reports_the_media_saved",  # 1.0
