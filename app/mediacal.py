@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -32,6 +32,12 @@ TAC_STEPS = tuple(range(160, 401, 20))           # percent, the ink-limit chart
 SOLVENT_VINYL_MAX_TAC = 300.0                    # the most solvent vinyl takes (percent)
 SPECTRO_DPI = 50
 SCAN_DPI = 150                 # the flatbed's resolution for charts (patch means)
+# a scanned chart's frame (docs/media.md "Measuring with the scanner"): a solid bar each
+# side of the patches, found on the scan wherever and at whatever small angle the chart
+# lies; 3 mm wide (no patch is narrower than 6 mm, so no cluster of patches looks like
+# one), 3 mm of paper between bar and patches
+BAR_MM = 3.0
+BAR_GAP_MM = 3.0
 
 Progress = Callable[[str], None]
 
@@ -59,6 +65,7 @@ class Printer:
     scan_dpi: int | None = None         # also scan each chart (last_scan_rgb: patch means)
     scanner_icc: Path | None = None     # measure with the scanner through this input profile
     last_scan_rgb: np.ndarray | None = None
+    bars: list = field(default_factory=list)   # the last chart's scan bars (mm), if framed
 
     def _settings(self, **more):
         from ..rip.settings import Placement, RipSettings
@@ -70,22 +77,31 @@ class Printer:
         return (round(PATCH_MM / 25.4 * self.dpi),
                 round(PATCH_MM * 1000 / self.profile.row_um))
 
-    def chart(self, values: np.ndarray, channels: int) -> tuple[np.ndarray, list]:
+    def chart(self, values: np.ndarray, channels: int, framed: bool = False) -> tuple[np.ndarray, list]:
         """An image (rows, cols, channels) uint8 of the patches, ACROSS a row, and each
-        patch's rectangle in mm of the image frame."""
+        patch's rectangle in mm of the image frame.  `framed`: with the scan's bars left and
+        right (their rectangles in `self.bars`)."""
         pw, ph = self.patch_pixels()
         n = values.shape[0]
         across = min(ACROSS, n)
         down = math.ceil(n / across)
-        img = np.zeros((down * ph, across * pw, channels), np.uint8)
+        col_mm, row_mm = 25.4 / self.dpi, self.profile.row_um / 1000
+        bar = round(BAR_MM / col_mm) if framed else 0
+        x0 = bar + round(BAR_GAP_MM / col_mm) if framed else 0
+        img = np.zeros((down * ph, across * pw + 2 * x0, channels), np.uint8)
         if channels == 3:
             img[:] = 255
-        col_mm, row_mm = 25.4 / self.dpi, self.profile.row_um / 1000
+        self.bars = []
+        if framed:
+            solid = (0, 0, 0, 255) if channels == 4 else (0, 0, 0)
+            for b0 in (0, img.shape[1] - bar):
+                img[:, b0:b0 + bar] = solid
+                self.bars.append((b0 * col_mm, 0.0, (b0 + bar) * col_mm, img.shape[0] * row_mm))
         rects = []
         for i in range(n):
             r, c = divmod(i, across)
-            img[r * ph:(r + 1) * ph, c * pw:(c + 1) * pw] = values[i]
-            rects.append((c * pw * col_mm, r * ph * row_mm, (c + 1) * pw * col_mm,
+            img[r * ph:(r + 1) * ph, x0 + c * pw:x0 + (c + 1) * pw] = values[i]
+            rects.append(((x0 + c * pw) * col_mm, r * ph * row_mm, (x0 + (c + 1) * pw) * col_mm,
                           (r + 1) * ph * row_mm))
         return img, rects
 
@@ -103,7 +119,8 @@ class Printer:
         from .devices import close_device, open_device
         profile = profile or self.profile
         values = np.asarray(values)
-        img, rects = self.chart(values, values.shape[1])
+        scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc else None)
+        img, rects = self.chart(values, values.shape[1], framed=bool(scan_dpi))
         measure_dir = self.measure_dir
         spectro = measure_dir is None
         if measure_dir is not None:
@@ -124,7 +141,6 @@ class Printer:
             opts: dict[str, Any] = dict(spectro_path=lab_path, spectro_dpi=SPECTRO_DPI) \
                 if spectro else {}
             scan_path = str(Path(tmp) / f"{name}-scan.tif")
-            scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc else None)
             if scan_dpi:
                 opts.update(scan_path=scan_path, scan_dpi=scan_dpi)
             dev = open_device(self.device, profile, faults, **opts)
@@ -136,7 +152,7 @@ class Printer:
                 close_device(dev)
                 job.close()
             if scan_dpi:
-                self.last_scan_rgb = scan_patches(scan_path, rects, scan_dpi)
+                self.last_scan_rgb = scan_patches(scan_path, rects, scan_dpi, self.bars)
                 if self.scanner_icc is not None:
                     return xicclu(self.scanner_icc, self.last_scan_rgb / 255.0, "f")[:, :3]
             if measure_dir is None:
@@ -145,13 +161,71 @@ class Printer:
                                       self.dpi, self.wait_s, self.progress)
 
 
-def scan_patches(path: str, rects: list, dpi: float, inset_mm: float = INSET_MM) -> np.ndarray:
-    """Each patch's mean 8-bit RGB (n, 3) in a scan of the chart as the emulated scanner
-    writes it (the image area at the scanner's margin, no offset or rotation)."""
+def find_chart(scan: np.ndarray, bars: list, dpi: float) -> np.ndarray:
+    """The similarity transform (2 x 3: chart mm -> scan pixels) of a scanned chart, from
+    its two bars wherever they lie (any offset, up to 10° and ±10 % scale): the dark
+    objects whose rotated bounding box is a bar's width and length; their centres against
+    the model's.  ValueError naming what was not found."""
+    import cv2
+    pix = 25.4 / dpi
+    grey = scan.mean(axis=2) if scan.ndim == 3 else scan.astype(np.float64)
+    paper, darkest = np.percentile(grey[::2, ::2], 90), np.percentile(grey[::2, ::2], 0.1)
+    if paper - darkest < 40:
+        raise ValueError("the scan is blank: no chart found")
+    binary = (grey < (paper + darkest) / 2).astype(np.uint8)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    want_w, want_l = BAR_MM / pix, (bars[0][3] - bars[0][1]) / pix
+    found = []
+    for c in contours:
+        if len(c) < 8:
+            continue
+        (cx, cy), (a, b), _ = cv2.minAreaRect(c)
+        w, ln = min(a, b), max(a, b)
+        if 0.6 * want_w <= w <= 1.5 * want_w and 0.85 * want_l <= ln <= 1.15 * want_l:
+            found.append((cx, cy))
+    if len(found) != 2:
+        raise ValueError(f"the chart's two bars were not found on the scan ({len(found)} "
+                         f"objects {BAR_MM:g} mm wide and {want_l * pix:.0f} mm long): is it "
+                         f"this chart, at {dpi:g} dpi?")
+    found.sort()                                           # left bar, right bar
+    model = np.array([[(x0 + x1) / 2, (y0 + y1) / 2] for x0, y0, x1, y1 in bars], np.float64)
+    d_m, d_s = model[1] - model[0], np.subtract(found[1], found[0])
+    scale = np.hypot(*d_s) / np.hypot(*d_m)
+    angle = math.atan2(d_s[1], d_s[0]) - math.atan2(d_m[1], d_m[0])
+    if abs(math.degrees(angle)) > 10 or not 0.9 / pix < scale < 1.1 / pix:
+        raise ValueError(f"the chart lies at {math.degrees(angle):.1f}° and scale "
+                         f"{scale * pix:.3f} on the scan: not this chart?")
+    rot = scale * np.array([[math.cos(angle), -math.sin(angle)],
+                            [math.sin(angle), math.cos(angle)]])
+    t = np.asarray(found[0]) - rot @ model[0]
+    return np.hstack([rot, t[:, None]])
+
+
+def scan_patches(path: str, rects: list, dpi: float, bars: list | None = None,
+                 inset_mm: float = INSET_MM) -> np.ndarray:
+    """Each patch's mean 8-bit RGB (n, 3) in a scan of the chart: with `bars`, the chart
+    found on the scan wherever it lies (find_chart) and each patch sampled inside its inset
+    through that transform; without, at its place in the emulated scanner's image area
+    (its margin, no offset or rotation)."""
     import tifffile
     from ..device_sim.scanner import MARGIN_UM
     scan = tifffile.imread(path).astype(np.float64)
+    if scan.ndim == 2:
+        scan = scan[:, :, None]
     pix = 25.4 / dpi
+    if bars:
+        M = find_chart(scan, bars, dpi)
+        out = []
+        for x0, y0, x1, y1 in rects:          # a grid of points one scan pixel apart
+            xs = np.arange(x0 + inset_mm, x1 - inset_mm, pix)
+            ys = np.arange(y0 + inset_mm, y1 - inset_mm, pix)
+            gx, gy = np.meshgrid(xs, ys)
+            u = np.rint(M[0, 0] * gx + M[0, 1] * gy + M[0, 2]).astype(int)
+            v = np.rint(M[1, 0] * gx + M[1, 1] * gy + M[1, 2]).astype(int)
+            if u.min() < 0 or v.min() < 0 or u.max() >= scan.shape[1] or v.max() >= scan.shape[0]:
+                raise ValueError("the chart runs off the scan: scan it whole")
+            out.append(scan[v, u].reshape(-1, scan.shape[-1]).mean(axis=0))
+        return np.array(out)
     margin = round(MARGIN_UM / 1000 / pix) * pix
     out = []
     for x0, y0, x1, y1 in rects:

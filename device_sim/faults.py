@@ -32,6 +32,8 @@ KINDS = {
     "scan-rotation": "scan: the sheet lies rotated by this many degrees on the glass",
     "scan-scale": "scan: the scanner's true resolution is this factor finer (e.g. 1.002)",
     "scan-offset": "scan: X,Y in mm: the sheet lies this far right/down on the glass",
+    "scan-margin": "scan: mm of paper scanned around the image area (default 3; more for a "
+                   "sheet turned or shifted on the glass)",
     "scan-noise": "scan: sensor noise, sigma in 8-bit levels (default 1.5)",
     "scan-blur": "scan: optics blur, Gaussian sigma (default 10um)",
     "scan-mode": "scan: rgb (default) or grey",
@@ -113,6 +115,7 @@ class Faults:
     scan_rotation: float = 0.0                           # degrees
     scan_scale: float = 1.0
     scan_offset: tuple = (0.0, 0.0)                      # mm
+    scan_margin: float = 3.0                             # mm around the image area
     scan_noise: float = 1.5                              # 8-bit levels
     scan_blur: Length = Length(10.0)
     scan_mode: str = "rgb"

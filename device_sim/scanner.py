@@ -23,7 +23,7 @@ from .faults import Faults
 from .physical import JobGeometry
 from .spectral import SpectralMedia, demichel
 
-MARGIN_UM = 3000.0                 # paper around the image area in the scan
+MARGIN_UM = 3000.0                 # paper around the image area in the scan (--inject scan-margin)
 STRIP = 64                         # scan rows made at a time (and the noise's seed block)
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)           # Rec. 709
 # The sensor: each channel's spectral sensitivity (its filter, the lamp and the CCD
@@ -165,7 +165,7 @@ class Scanner:
             raise ValueError(f"scan resolution {dpi} dpi: must be 50..9600")
         self.path, self.geo, self.dpi = path, geo, float(dpi)
         self.pix = 25_400.0 / self.dpi
-        self.margin_px = int(round(MARGIN_UM / self.pix))
+        self.margin_px = int(round(faults.scan_margin * 1000.0 / self.pix))
         self.margin_um = self.margin_px * self.pix
         # skewed paper turns the print and a longer feed stretches it: the field grows so
         # that the sheet's whole print is on the glass (docs/physical.md, "Skew")
