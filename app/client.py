@@ -238,9 +238,9 @@ class Client:
         ApiError naming the file and the problem when it is broken."""
         return self.request("POST", "/v1/presets/reload")
 
-    def report_csv(self, job_id: int | None = None) -> str:
-        return self.request("GET", "/v1/report?format=csv" + (f"&job={job_id}" if job_id else ""),
-                            raw=True)
+    def report_csv(self, job_id: int | None = None, costs: bool = False) -> str:
+        return self.request("GET", "/v1/report?format=csv" + (f"&job={job_id}" if job_id else "")
+                            + ("&costs=1" if costs else ""), raw=True)
 
     def report(self, job_id: int | None = None) -> list[dict]:
         return self.request("GET", "/v1/report" + (f"?job={job_id}" if job_id else ""))["prints"]
@@ -249,6 +249,35 @@ class Client:
         """Change a job not yet started: any of settings (a partial mapping: only the
         settings given change), copies, priority, printer."""
         return self.request("PATCH", f"/v1/jobs/{job_id}", body=change)["job"]
+
+    def reprint(self, job_id: int, **change) -> dict:
+        """A finished job's archived file printed again as a new job: with its settings, or
+        any of settings (partial), copies, priority, hold, printer, force changed."""
+        return self.request("POST", f"/v1/jobs/{job_id}/reprint", body=change)["job"]
+
+    def release(self, job_id: int, force: bool = False) -> dict:
+        """A held job to the queue; force: past the fit checks (paper width, roll left)."""
+        return self.request("POST", f"/v1/jobs/{job_id}/release",
+                            body={"force": True} if force else None)["job"]
+
+    def fit(self, job_id: int) -> dict:
+        return self.request("GET", f"/v1/jobs/{job_id}/fit")
+
+    def roll(self, printer: str, body: dict | None = None) -> dict:
+        """A printer's roll ({printer, roll, paper_mm}); body: load one ({media, length_m |
+        label}), {remaining_m}, or {unload: true}."""
+        if body is None:
+            return self.request("GET", f"/v1/printers/{printer}/roll")
+        return self.request("POST", f"/v1/printers/{printer}/roll", body=body)
+
+    def prices(self, new: dict | None = None) -> dict:
+        if new is None:
+            return self.request("GET", "/v1/prices")
+        return self.request("POST", "/v1/prices", body=new)
+
+    def report_costs(self, job_id: int | None = None) -> dict:
+        """{prices, prints (each with its cost), totals}."""
+        return self.request("GET", "/v1/report?costs=1" + (f"&job={job_id}" if job_id else ""))
 
     def preview(self, job_id: int, px: int | None = None) -> dict:
         return self.request("GET", f"/v1/jobs/{job_id}/preview" + (f"?px={px}" if px else ""))

@@ -3,6 +3,9 @@ the machine commands
 of the printer API (driver/printer.py) from the command line, on a real link or the
 emulator (docs/driver.md, "The printer API").
 
+`wideprint printer roll [show|load|set|unload]`: the roll loaded on a printer of the print
+server, through its API (docs/server.md "Rolls") - the server owns the printers' paper count.
+
 A motion command brings the printer as far as it needs first (enable, home), as the
 front panel of a plotter does, and says so.  Exit codes as `print`: 0 done, 1 the printer
 refused or faulted, 2 bad options, 3 the printer cannot be reached.
@@ -16,7 +19,9 @@ import sys
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
 ACTIONS = ("status", "home", "park", "feed", "measure", "clear-fault",
-           "spit", "purge", "cap", "uncap")          # the last four: head care (protocol 2.9)
+           "spit", "purge", "cap", "uncap",          # the last four: head care (protocol 2.9)
+           "roll")                                   # the print server's roll (its API)
+ROLL_ACTIONS = ("show", "load", "set", "unload")
 
 
 def add_parser(sub) -> None:
@@ -26,7 +31,8 @@ def add_parser(sub) -> None:
                        description="Status and machine commands of one printer, through the "
                        "driver's printer API.")
     p.add_argument("action", choices=ACTIONS)
-    p.add_argument("mm", nargs="?", type=float, help="feed: millimetres of paper (negative: back)")
+    p.add_argument("mm", nargs="?", help="feed: millimetres of paper (negative: back); roll: "
+                   f"{', '.join(ROLL_ACTIONS)} (default show)")
     p.add_argument("--device", default="emulator",
                    help=devices.DEVICE_HELP + " (default: emulator)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
@@ -39,7 +45,61 @@ def add_parser(sub) -> None:
     p.add_argument("--ms", type=int, metavar="MS",
                    help="purge: pump time in ms (default: the profile's purge_ms)")
     p.add_argument("--json", action="store_true", help="status as JSON")
+    r = p.add_argument_group("roll (through the print server: docs/server.md \"Rolls\")")
+    r.add_argument("--printer", metavar="NAME", help="the server's printer (default: its first)")
+    r.add_argument("--media", metavar="NAME", help="roll load: the media (library name: "
+                   "wideprint media list)")
+    r.add_argument("--length", metavar="M", help="roll load: its length (50, 50m, 50000mm)")
+    r.add_argument("--label", metavar="TEXT", help="roll load: the roll's label as read, e.g. "
+                   "'media=vinyl-300 length=50m'")
+    r.add_argument("--remaining", metavar="M", help="roll set: what is left on it, measured")
+    r.add_argument("--state-dir", metavar="DIR", help="the server's state directory")
     p.set_defaults(func=cmd_printer)
+
+
+def _show_roll(r: dict) -> None:
+    roll = r["roll"]
+    if roll is None:
+        print(f"printer {r['printer']}: no roll loaded (wideprint printer roll load --media "
+              f"NAME --length M)")
+        return
+    width = roll["width_mm"] if roll["width_mm"] is not None else r.get("paper_mm")
+    left = "unknown length" if roll["remaining_m"] is None else \
+        f"{roll['remaining_m']:,.2f} m left of {roll['length_m']:,.2f} m"
+    print(f"printer {r['printer']}: {roll['media']}, "
+          + (f"{width:,.0f} mm wide" if width else "width not measured yet") + f", {left}")
+
+
+def cmd_roll(args) -> int:
+    """`wideprint printer roll ...`: the print server's roll on one printer."""
+    from .client import ApiError, Client
+    what = args.mm or "show"
+    if what not in ROLL_ACTIONS:
+        print(f"wideprint printer roll: {what!r}: one of {', '.join(ROLL_ACTIONS)}", file=sys.stderr)
+        return EXIT_USAGE
+    body: dict | None = None
+    if what == "load":
+        body = {k: v for k, v in (("media", args.media), ("length_m", args.length),
+                                  ("label", args.label)) if v is not None}
+    elif what == "set":
+        if args.remaining is None:
+            print("wideprint printer roll set: --remaining M", file=sys.stderr)
+            return EXIT_USAGE
+        body = {"remaining_m": args.remaining}
+    elif what == "unload":
+        body = {"unload": True}
+    try:
+        client = Client(args.state_dir)
+        name = args.printer or client.printers()[0]["name"]
+        r = client.roll(name, body)
+    except ApiError as exc:
+        print(f"wideprint printer roll: {exc}", file=sys.stderr)
+        return EXIT_DEVICE if exc.status == 0 else EXIT_FAILED
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        _show_roll(r)
+    return EXIT_OK
 
 
 def status_dict(printer) -> dict:
@@ -138,9 +198,17 @@ def cmd_printer(args) -> int:
     from ..rip.profile import load_profile
     from ..driver.headcare import HeadCare
     from .devices import close_device, is_emulator_spec, open_device
+    if args.action == "roll":
+        return cmd_roll(args)
     if (args.action == "feed") != (args.mm is not None):
         print("wideprint printer: feed takes a length in mm (and only feed does)", file=sys.stderr)
         return EXIT_USAGE
+    if args.action == "feed":
+        try:
+            args.mm = float(args.mm)
+        except ValueError:
+            print(f"wideprint printer: feed {args.mm!r}: a length in mm", file=sys.stderr)
+            return EXIT_USAGE
     try:
         profile = load_profile(args.profile)
         mask = head_mask(profile, args.heads)

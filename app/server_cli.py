@@ -214,6 +214,13 @@ def cmd_serve(args) -> int:
             print("wideprint serve: --keep-failed must be 0 or more days", file=sys.stderr)
             return EXIT_USAGE
         cfg.keep_failed_s = args.keep_failed * 86400
+    from .server import archive
+    try:
+        for key, value in archive.from_args(args).items():
+            setattr(cfg, key, value)
+    except ValueError as exc:
+        print(f"wideprint serve: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     ipp = _IppStarter(args) if args.ipp or args.ipp_listen else None
     try:
         rc = serve(cfg, ready=ipp.start if ipp else None)
@@ -288,7 +295,8 @@ def cmd_submit(args) -> int:
         try:
             r = client.submit(f, preset=args.preset, copies=args.copies, priority=args.priority,
                               hold=args.hold or None, settings=_settings_from(args) or None,
-                              client=args.client, printer=args.printer)
+                              client=args.client, printer=args.printer,
+                              force=args.force or None)
             job = r["job"]
             results.append(job)
             if not args.json:
@@ -369,6 +377,8 @@ def _job_action(what: str):
                                      else ""), file=sys.stderr)
                             rc = EXIT_FAILED
                             continue
+                    elif what == "release" and args.force:
+                        job = client.release(job_id, force=True)
                     else:
                         job = client.action(job_id, what)
                     print(f"job {job['id']}: {job['state']}"
@@ -493,9 +503,130 @@ def cmd_presets(args) -> int:
     return EXIT_OK
 
 
+def _set_values(items: list[str] | None) -> dict:
+    """--set KEY=VALUE (repeated) as a partial settings mapping: VALUE as JSON when it is
+    JSON (numbers, true, null), else a string; placement.KEY for a placement setting."""
+    out: dict = {}
+    for item in items or []:
+        key, eq, text = item.partition("=")
+        if not eq or not key:
+            raise ValueError(f"--set {item!r}: expected KEY=VALUE (e.g. dpi=600, "
+                             f"placement.rotate=90)")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            value = text
+        if key.startswith("placement."):
+            out.setdefault("placement", {})[key[len("placement."):]] = value
+        else:
+            out[key] = value
+    return out
+
+
+def cmd_reprint(args) -> int:
+    """`wideprint reprint ID...`: finished jobs printed again from the archive
+    (docs/server.md "Archive and reprint")."""
+    from .safe_text import safe
+    try:
+        client = _client(args)
+        change: dict = {}
+        settings = dict(_settings_from(args) or {})
+        more = _set_values(args.set)
+        if "placement" in more and "placement" in settings:
+            more["placement"] = dict(settings["placement"], **more["placement"])
+        settings.update(more)
+        if settings:
+            change["settings"] = settings
+        for key in ("copies", "priority", "printer"):
+            if getattr(args, key) is not None:
+                change[key] = getattr(args, key)
+        if args.hold:
+            change["hold"] = True
+        if args.force:
+            change["force"] = True
+    except (ApiError, ValueError) as exc:
+        return _fail("reprint", exc)
+    rc = EXIT_OK
+    for job_id in args.ids:
+        try:
+            job = client.reprint(job_id, **change)
+        except ApiError as exc:
+            print(f"wideprint reprint: job {job_id}: {exc}", file=sys.stderr)
+            if exc.status == 0:
+                return EXIT_SERVER
+            rc = EXIT_FAILED
+            continue
+        print(f"job {job_id}: reprinted as job {job['id']} ({safe(job['name'])}) {job['state']}")
+        if args.wait:
+            done = client.wait(job["id"], timeout=args.wait)
+            print(f"job {done['id']}: {done['state']}"
+                  + (f": {safe(done['message'])}" if done["message"] else ""))
+            rc = rc if done["state"] == "done" else EXIT_FAILED
+    return rc
+
+
+def cmd_prices(args) -> int:
+    """`wideprint prices [--set FILE]`: the server's price list (docs/server.md "Prices and
+    costs")."""
+    try:
+        client = _client(args)
+        if args.set:
+            text = Path(args.set).read_text()
+            if args.set.endswith(".toml"):
+                import tomllib
+                new = tomllib.loads(text)
+            else:
+                new = json.loads(text)
+            prices = client.prices(new)
+        else:
+            prices = client.prices()
+    except (ApiError, OSError, ValueError) as exc:
+        return _fail("prices", exc)
+    if args.json:
+        print(json.dumps(prices, indent=2))
+        return EXIT_OK
+    cur = prices["currency"]
+    print("ink per ml:      " + ", ".join(f"{c.upper()} {v:g}" for c, v in
+                                          prices["ink_per_ml"].items()) + f" {cur}")
+    print("media per m²:    " + ", ".join(f"{m} {v:g}" for m, v in
+                                          sorted(prices["media_per_m2"].items())) + f" {cur}")
+    print(f"machine per hour: {prices['machine_per_hour']:g} {cur}")
+    return EXIT_OK
+
+
+def _report_costs(client, args) -> int:
+    """`report --costs`: every printed copy with its cost at the server's price list, and
+    the totals."""
+    if args.csv:
+        text = client.report_csv(args.job, costs=True)
+        Path(args.csv).write_text(text)
+        print(f"{args.csv}: {text.count(chr(10)) - 1} prints, with costs")
+        return EXIT_OK
+    r = client.report_costs(args.job)
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return EXIT_OK
+    cur = r["prices"]["currency"]
+    print(f"{'JOB':>5} {'COPY':>4} {'OUTCOME':9} {'M2':>8} {'INK ML':>9} {'SECONDS':>8} "
+          f"{'INK':>9} {'MEDIA':>9} {'TIME':>9} {'COST':>10}  FILE")
+    for p in r["prints"]:
+        c = p["cost"]
+        ink = sum(p[f"ink_{k}_ml"] for k in "cmyk")
+        print(f"{p['job_id']:>5} {p['copy']:>4} {p['outcome']:9} {p['area_m2']:8.4f} "
+              f"{ink:9.4f} {p['duration_s']:8.1f} {c['ink']:9.4f} {c['media']:9.4f} "
+              f"{c['time']:9.4f} {c['total']:10.4f}  {p['file']}")
+    t = r["totals"]
+    print(f"total: {t['prints']} prints, {t['area_m2']:.4f} m², {t['ink_ml']:.4f} ml ink; "
+          f"ink {t['ink']:.4f} + media {t['media']:.4f} + time {t['time']:.4f} = "
+          f"{t['total']:.4f} {cur}")
+    return EXIT_OK
+
+
 def cmd_report(args) -> int:
     try:
         client = _client(args)
+        if args.costs:
+            return _report_costs(client, args)
         text = client.report_csv(args.job)
     except ApiError as exc:
         return _fail("report", exc)
@@ -582,6 +713,8 @@ def add_parser(sub) -> None:
     p.add_argument("--keep-failed", type=float, metavar="DAYS",
                    help="keep the spooled files of failed and cancelled jobs this long, so "
                         "they can be requeued (default 7; 0 = delete them at once)")
+    from .server import archive
+    archive.add_arguments(p)               # the archive's retention (docs/server.md)
     p.add_argument("--paused", action="store_true",
                    help="start with the queue paused (jobs are accepted, none printed)")
     p.add_argument("--profile", metavar="TOML", help="printer profile")
@@ -613,7 +746,10 @@ def add_parser(sub) -> None:
     p.add_argument("--preset", help="settings preset (the server's presets file)")
     p.add_argument("--copies", type=int)
     p.add_argument("--priority", type=int, help="-100..100, higher prints first (default 0)")
-    p.add_argument("--hold", action="store_true", help="queue the job held")
+    p.add_argument("--hold", action="store_true", help="queue the job held (default: the "
+                   "preset's hold)")
+    p.add_argument("--force", action="store_true", help="queue it even if it does not fit the "
+                   "paper loaded (too wide, longer than the roll left)")
     p.add_argument("--client", help="a tag for the accounting (default: none)")
     p.add_argument("--printer", metavar="NAME", help="the printer to print on (default: any, the "
                    "first free one)")
@@ -637,6 +773,9 @@ def add_parser(sub) -> None:
                                    "(they print again from the start)")):
         p = _client_parser(sub, name, help)
         p.add_argument("ids", nargs="+", type=int, metavar="ID")
+        if name == "release":
+            p.add_argument("--force", action="store_true", help="past the fit checks (a job "
+                           "held because the roll is too short: the operator knows better)")
         if name == "cancel":
             p.add_argument("--timeout", type=float, default=60.0, metavar="S",
                            help="wait at most this long for a printing job to stop (default "
@@ -678,7 +817,32 @@ def add_parser(sub) -> None:
     p.add_argument("--csv", metavar="FILE", help="write the CSV here")
     p.add_argument("--json", action="store_true")
     p.add_argument("--job", type=int, metavar="ID")
+    p.add_argument("--costs", action="store_true", help="each copy's cost (ink, media, "
+                   "machine time) at the server's price list, and the totals")
     p.set_defaults(func=cmd_report)
+
+    p = _client_parser(sub, "reprint", "print finished jobs again from the archive, with "
+                       "their settings or changed ones")
+    p.add_argument("ids", nargs="+", type=int, metavar="ID")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="change a setting (repeat; placement.KEY for placement, e.g. "
+                        "placement.rotate=90; null: back to automatic)")
+    p.add_argument("--copies", type=int)
+    p.add_argument("--priority", type=int)
+    p.add_argument("--printer", metavar="NAME", help="print it on this printer (or any)")
+    p.add_argument("--hold", action="store_true", help="add it held (default: its preset's)")
+    p.add_argument("--force", action="store_true", help="even if it does not fit the paper")
+    p.add_argument("--wait", type=float, nargs="?", const=3600.0, metavar="S",
+                   help="wait until it has printed (exit 1 if it did not)")
+    add_settings_arguments(p)
+    p.set_defaults(func=cmd_reprint)
+
+    p = _client_parser(sub, "prices", "the price list that turns estimates into quotes and "
+                       "prints into costs")
+    p.add_argument("--set", metavar="FILE", help="a new price list (JSON or TOML: currency, "
+                   "ink_per_ml, media_per_m2, machine_per_hour)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_prices)
 
     p = _client_parser(sub, "clear-fault", "a printer's fault cleared: its stopped job resumes "
                        "at its first unfinished stroke (or fails), its queue runs again")

@@ -209,7 +209,11 @@ def _run(tmp_path, job_file, point_id, printer):
     for p in prints:
         if p["outcome"] == "interrupted":
             assert 0 < p["strokes_printed"] < p["strokes_total"] and "restarted" in p["message"]
-    assert not [f for f in (state / "spool").iterdir()], "the done job's spool copy is deleted"
+    # the done job's spool copy is its archived file (docs/server.md "Archive and reprint"):
+    # one file, the job's, never a second copy or an orphan
+    from wideprint.app.server.fsck import file_digest
+    left = list((state / "spool").iterdir())
+    assert len(left) == 1 and file_digest(left[0]) == final["sha256"], left
     return held, prints
 
 

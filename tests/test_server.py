@@ -563,9 +563,10 @@ def test_cancel_a_printing_job_stops_it_and_the_queue_goes_on(srv, client, tmp_p
     rows = client.report(job["id"])
     assert len(rows) == 1 and rows[0]["outcome"] == "cancelled"
     assert 0 < rows[0]["strokes_printed"] < rows[0]["strokes_total"]
-    # the cancelled job keeps its spooled copy (it may be requeued); the done one does not
+    # the cancelled job keeps its spooled copy (it may be requeued); the done one too, in
+    # the archive (it may be reprinted: docs/server.md "Archive and reprint")
     assert os.path.isfile(db_job(srv.state_dir, job["id"])["spool_path"])
-    assert db_job(srv.state_dir, nxt["id"])["spool_path"] is None
+    assert os.path.isfile(db_job(srv.state_dir, nxt["id"])["spool_path"])
 
 
 # -- requeue -------------------------------------------------------------------------------------
@@ -608,10 +609,11 @@ def test_requeue_a_cancelled_job_prints_it_again_bit_exact(srv, client, tmp_path
     text = client.report_csv(jid)
     assert [(r["attempt"], r["outcome"]) for r in csv.DictReader(io.StringIO(text))] == \
         [("1", "cancelled"), ("2", "done")]
-    assert db_job(srv.state_dir, jid)["spool_path"] is None         # done: the copy went
+    assert os.path.isfile(db_job(srv.state_dir, jid)["spool_path"])  # done: archived
     with pytest.raises(ApiError) as e:
         client.action(jid, "requeue")
     assert e.value.status == 409 and f"job {jid} is done" in str(e.value)
+    assert f"reprint it (wideprint reprint {jid})" in str(e.value)
 
 
 def _wait_state(client, job_id, states, timeout=60):
@@ -779,7 +781,7 @@ def test_schema_1_database_gets_the_attempt_columns(tmp_path):
     sp = Spool(state)
     assert sp.get(1)["attempt"] == 1
     assert "attempt" in {r[1] for r in sp.db.execute("PRAGMA table_info(prints)")}
-    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "5"
+    assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "6"
     sp.close()
 
 
@@ -808,7 +810,7 @@ def test_schema_2_database_opens_with_its_jobs_and_stroke_columns(tmp_path):
     db.close()
     sp = Spool(state)
     try:
-        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "5"
+        assert sp.db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0] == SCHEMA_VERSION == "6"
         for table in ("jobs", "prints"):
             cols = {r[1] for r in sp.db.execute(f"PRAGMA table_info({table})")}
             assert not {c for c in cols if c.startswith("passes")}, cols

@@ -597,14 +597,26 @@ class ApiHandler(BaseHTTPRequestHandler):
                     raise Invalid("reload takes no parameters")
                 return self._json(200, self.srv.reload_presets())
             if method == "GET" and route == ["report"]:
-                q = self._query(url.query, ("job", "format"))
-                job = _number("job", q["job"]) if "job" in q else None
+                q = self._query(url.query, ("job", "format", "costs"))
+                of_job = _number("job", q["job"]) if "job" in q else None
                 fmt = q.get("format", "json")
                 if fmt not in ("json", "csv"):
                     raise Invalid(f"format must be json or csv, not {fmt[:20]!r}")
+                if q.get("costs", "0") not in ("0", "1"):
+                    raise Invalid("costs must be 0 or 1")
+                with_costs = q.get("costs") == "1"       # docs/server.md "Prices and costs"
                 if fmt == "csv":
-                    return self._send(200, self.srv.report_csv(job).encode(), "text/csv")
-                return self._json(200, {"prints": self.srv.spool.prints(job)})
+                    return self._send(200, self.srv.report_csv(of_job, with_costs).encode(),
+                                      "text/csv")
+                if with_costs:
+                    return self._json(200, self.srv.report_costs(of_job))
+                return self._json(200, {"prints": self.srv.spool.prints(of_job)})
+            if route == ["prices"] and method in ("GET", "POST"):
+                self._query(url.query, ())             # docs/server.md "Prices and costs"
+                if method == "POST":
+                    self._operator_only("setting the price list")
+                    return self._json(200, self.srv.prices(body))
+                return self._json(200, self.srv.prices())
             if method == "POST" and route == ["queue"]:
                 self._query(url.query, ())
                 self._operator_only("pausing or resuming the queue")
@@ -643,6 +655,12 @@ class ApiHandler(BaseHTTPRequestHandler):
                     raise Invalid(f"printer {route[1][:40]}: no live media (an emulated printer "
                                   f"shows it once it has printed)", 404)
                 return self._send(200, png, "image/png")
+            if len(route) == 3 and route[0] == "printers" and route[2] == "roll" and \
+                    method in ("GET", "POST"):
+                self._query(url.query, ())             # docs/server.md "Rolls"
+                if method == "POST":
+                    self._operator_only("loading a roll")
+                return self._json(200, self.srv.roll(route[1], body if method == "POST" else None))
             if len(route) == 3 and route[0] == "printers" and method == "POST":
                 self._query(url.query, ())
                 name, what = route[1], route[2]
@@ -698,7 +716,32 @@ class ApiHandler(BaseHTTPRequestHandler):
                         else THUMB_PX
                     if route[2] == "preview.png":
                         return self._send(200, self.srv.previews.png(job, px), "image/png")
-                    return self._json(200, self.srv.previews.info(job, px))
+                    info = self.srv.previews.info(job, px)
+                    # a quote at the price list, and whether it fits the paper loaded
+                    info["quote"] = self.srv.quote(job, info)
+                    if job["state"] in ("queued", "held") and job.get("spool_path"):
+                        info["fit"] = self.srv.fit(job)
+                    return self._json(200, info)
+                if method == "GET" and len(route) == 3 and route[2] == "fit":
+                    job = self.srv.spool.get(job_id)
+                    if job is None:
+                        raise Invalid(f"no job {job_id}", 404)
+                    if not job.get("spool_path"):
+                        raise Invalid(f"job {job_id}: its file is no longer spooled", 410)
+                    return self._json(200, self.srv.fit(job))
+                if method == "POST" and len(route) == 3 and route[2] == "reprint":
+                    self._may_act(job_id, "reprint")   # docs/server.md "Archive and reprint"
+                    new = self.srv.reprint(job_id, body)
+                    owner = self.who.name
+                    if owner is not None:
+                        self.server.owners.set(new["id"], owner)
+                    return self._json(201, self._job(new))
+                if method == "POST" and len(route) == 3 and route[2] == "release" and body:
+                    if not isinstance(body, dict) or set(body) != {"force"} or \
+                            not isinstance(body["force"], bool):
+                        raise Invalid('release takes {"force": true|false} or nothing')
+                    self._may_act(job_id, "release")
+                    return self._json(200, self._job(self.srv.release(job_id, body["force"])))
                 if method == "POST" and len(route) == 3 and route[2] == "move":
                     if not isinstance(body, dict) or set(body) != {"printer"} or \
                             not isinstance(body["printer"], (str, type(None))):
@@ -825,8 +868,9 @@ class ApiHandler(BaseHTTPRequestHandler):
             job, created = srv.queue_file(
                 self.rfile, req["name"], size, exact=True, source="api",
                 settings=req["settings"], preset=req["preset"], copies=req["copies"],
-                priority=req["priority"], hold=req["hold"], key=req["key"], client=req["client"],
-                printer=req["printer"])
+                priority=req["priority"], hold=req["hold"] if "hold" in raw else None,
+                key=req["key"], client=req["client"], printer=req["printer"],
+                force=req["force"], fit=True)
         except Invalid as exc:
             self.close_connection = True
             return self._error(exc.status, str(exc), close=True)

@@ -33,6 +33,7 @@ import time
 import uuid
 from pathlib import Path
 
+from . import archive, costs
 from .accounting import prints_csv
 from .api import ApiHandler, _HTTPServer
 from .config import (CHUNK, IMAGE_SUFFIXES, MAX_COPIES, PRIORITY_RANGE, SERVER_FILE, ServerConfig,
@@ -40,6 +41,7 @@ from .config import (CHUNK, IMAGE_SUFFIXES, MAX_COPIES, PRIORITY_RANGE, SERVER_F
 from .hotfolders import HotFolders
 from .presets import Presets
 from .previews import Previews
+from .rolls import Rolls, paper_per_copy_mm, short_of_roll
 from .sdnotify import notify
 from . import crashpoints, fsck
 from .spool import Spool
@@ -72,6 +74,7 @@ class PrintServer:
         self.token = ensure_token(self.state_dir)
         fsck.check_at_start(self.state_dir)        # a lost queue is never "cleaned" away
         self.spool = Spool(self.state_dir)
+        self.rolls = Rolls(self.spool, self.state_dir / "media")
         self.started = time.time()
         self.recovered = self.spool.recover(config.on_crash)
         for job in self.recovered:
@@ -155,7 +158,12 @@ class PrintServer:
     def expire_spool(self) -> None:
         """Spool copies of failed and cancelled jobs older than --keep-failed go (those
         jobs can no longer be requeued)."""
-        for path in self.spool.expire_copies(time.time() - self.config.keep_failed_s):
+        now = time.time()
+        gone = self.spool.expire_copies(now - self.config.keep_failed_s)
+        # the archive of done jobs (docs/server.md "Archive and reprint")
+        gone += self.spool.expire_archive(now - self.config.archive_days * 86400,
+                                          archive.max_bytes(self.config))
+        for path in gone:
             try:
                 fsck.remove_copy(path)
             except OSError:
@@ -173,7 +181,10 @@ class PrintServer:
 
     def keeps_copy(self, state: str) -> bool:
         """Whether a job ending in `state` keeps its spool copy: failed and cancelled jobs
-        do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0."""
+        do, for requeue (docs/server.md, "Requeue"), unless --keep-failed is 0; done jobs
+        do, for reprints ("Archive and reprint"), unless --archive-days is 0."""
+        if state == "done":
+            return archive.keeps_done(self.config)     # the archive, for reprints
         return state in ("failed", "cancelled") and self.config.keep_failed_s > 0
 
     @property
@@ -235,15 +246,23 @@ class PrintServer:
 
     # -- intake -------------------------------------------------------------------------------
     def queue_file(self, src, name: str, size: int, *, exact: bool = False, check=None,
-                   **fields) -> tuple[dict, bool]:
+                   fit: bool = False, **fields) -> tuple[dict, bool]:
         """Copy a file into the spool and queue it as a job: (job, created).  The copy is
         owned by the job, or deleted before this returns or raises — whatever fails (the
         copy, `check()` after it, the database), no spool file is left without a job.
-        A duplicate key returns the job already queued, and its copy is deleted too."""
+        A duplicate key returns the job already queued, and its copy is deleted too.
+        fit: refuse a job that does not fit the loaded paper unless `force` (Invalid 422
+        naming the file: docs/server.md "Fit before it fails").  hold None: the preset's
+        default ("Presets")."""
+        if fields.get("hold") is None:
+            fields["hold"] = self.preset_source.holds(fields.get("preset"))
         spool_path, n, digest = self.spool_copy(src, name, size, exact=exact)
         try:
             if check is not None:
                 check()
+            if fit:
+                self.check_fit(dict(fields, id=None, name=name, spool_path=spool_path,
+                                    sha256=digest, copies_done=0))
             # its description beside it, so a lost database can be rebuilt (fsck.py)
             fsck.write_description(spool_path, dict(fields, name=name, size=n, sha256=digest))
             job, created = self.spool.add_job(name=name, spool_path=spool_path, size=n,
@@ -361,7 +380,6 @@ class PrintServer:
         `settings` is a partial settings mapping checked by the one schema and laid over the
         job's own (placement field by field; null puts a setting back to automatic), so an
         operator editing one setting of several jobs changes only that setting of each."""
-        from ...rip.settings import merge
         if not isinstance(change, dict) or not change or set(change) - EDITABLE:
             raise Invalid(f"expected an object with some of {', '.join(sorted(EDITABLE))}")
         job = self.spool.get(job_id)
@@ -374,22 +392,8 @@ class PrintServer:
             kw["copies"] = _check_int("copies", change["copies"], 1, MAX_COPIES)
         if "settings" in change:
             profile = self.profiles.get(job["printer"] or "") or self.profile
-            raw = change["settings"]
-            if not isinstance(raw, dict) or not isinstance(raw.get("placement", {}), dict):
-                raise Invalid("settings must be a JSON object (placement a nested one)")
             # null: the setting goes back to its default (the key is dropped)
-            dropped = {k for k, v in raw.items() if v is None}
-            place = raw.get("placement", {})
-            dropped_place = {k for k, v in place.items() if v is None}
-            part = dict({k: v for k, v in raw.items() if v is not None and k != "placement"},
-                        placement={k: v for k, v in place.items() if v is not None})
-            merged = merge(job["settings"], validate_settings(part, profile, self.state_dir / "icc"))
-            merged = {k: v for k, v in merged.items() if k not in dropped}
-            merged["placement"] = {k: v for k, v in merged.get("placement", {}).items()
-                                   if k not in dropped_place}
-            if not merged["placement"]:
-                del merged["placement"]
-            kw["settings"] = validate_settings(merged, profile, self.state_dir / "icc")
+            kw["settings"] = self._merged_settings(job["settings"], change["settings"], profile)
         job = self.spool.edit(job_id, **kw)
         if "printer" in change:
             job = self.move(job_id, change["printer"])
@@ -397,10 +401,130 @@ class PrintServer:
         self.notify()
         return job
 
-    def release(self, job_id: int) -> dict:
-        job = self.spool.release(job_id)
+    def release(self, job_id: int, force: bool = False) -> dict:
+        """A held job to the queue; force: past the fit checks (a roll that holds more than
+        the server knows; docs/server.md "Fit before it fails")."""
+        job = self.spool.release(job_id, force=force)
         self.notify()
         return job
+
+    REPRINT_KEYS = {"settings", "copies", "priority", "hold", "printer", "force", "client"}
+
+    def reprint(self, job_id: int, change: dict | None = None) -> dict:
+        """POST /v1/jobs/ID/reprint (docs/server.md "Archive and reprint"): a finished job's
+        archived file as a new job - its settings, copies, priority, preset and printer, or
+        the ones `change` gives (settings laid over the job's as for an edit; null drops
+        one).  The new job checks the fit like a submission and names the one it reprints
+        (`reprint_of`)."""
+        change = change or {}
+        if not isinstance(change, dict) or set(change) - self.REPRINT_KEYS:
+            raise Invalid(f"expected an object with some of {', '.join(sorted(self.REPRINT_KEYS))}")
+        job = self.spool.get(job_id)
+        if job is None:
+            raise Invalid(f"no job {job_id}", 404)
+        if job["state"] not in ("done", "failed", "cancelled"):
+            raise Invalid(f"job {job_id} is {job['state']}: only a finished job is reprinted "
+                          f"(a waiting one prints as it is)", 409)
+        try:
+            src = archive.check_archived(job)
+        except FileNotFoundError as exc:
+            raise Invalid(str(exc), 410) from None
+        except ValueError as exc:
+            raise Invalid(str(exc), 409) from None
+        printer = change.get("printer", job["printer"])
+        if printer in ("", "any"):
+            printer = None
+        if printer is not None:
+            self.printer_worker(printer)
+        settings = job["settings"]
+        if change.get("settings") is not None:
+            profile = self.profiles.get(printer or "") or self.profile
+            settings = self._merged_settings(settings, change["settings"], profile)
+        for k in ("hold", "force"):
+            if not isinstance(change.get(k, False), bool):
+                raise Invalid(f"{k} must be true or false")
+        client = change.get("client", job["client"])
+        if client is not None and (not isinstance(client, str) or not 0 < len(client) <= 100):
+            raise Invalid("client must be a string of 1..100 characters")
+        fields = dict(source="reprint", settings=settings, preset=job["preset"],
+                      copies=_check_int("copies", change.get("copies", job["copies"]), 1, MAX_COPIES),
+                      priority=_check_int("priority", change.get("priority", job["priority"]),
+                                          *PRIORITY_RANGE),
+                      hold=change.get("hold"), client=client, printer=printer,
+                      force=bool(change.get("force", False)), reprint_of=job_id)
+        if fields["hold"] is None:
+            fields["hold"] = self.preset_source.holds(job["preset"])
+        path = archive.link_copy(self.spool.spool_dir, src)
+        try:
+            self.check_fit(dict(fields, id=None, name=job["name"], spool_path=path,
+                                sha256=job["sha256"], copies_done=0))
+            fsck.write_description(path, dict(fields, name=job["name"], size=job["size"],
+                                              sha256=job["sha256"]))
+            new, _ = self.spool.add_job(name=job["name"], spool_path=path, size=job["size"],
+                                        sha256=job["sha256"], **fields)
+        except BaseException:
+            fsck.remove_copy(path)
+            raise
+        log.info("job %s reprints job %s (%s)", new["id"], job_id, job["name"])
+        self.notify()
+        return new
+
+    def _merged_settings(self, old: dict, raw, profile) -> dict:
+        """A partial settings mapping checked by the one schema and laid over `old`
+        (placement field by field; null puts a setting back to automatic)."""
+        from ...rip.settings import merge
+        if not isinstance(raw, dict) or not isinstance(raw.get("placement", {}), dict):
+            raise Invalid("settings must be a JSON object (placement a nested one)")
+        dropped = {k for k, v in raw.items() if v is None}
+        place = raw.get("placement", {})
+        dropped_place = {k for k, v in place.items() if v is None}
+        part = dict({k: v for k, v in raw.items() if v is not None and k != "placement"},
+                    placement={k: v for k, v in place.items() if v is not None})
+        merged = merge(old, validate_settings(part, profile, self.state_dir / "icc"))
+        merged = {k: v for k, v in merged.items() if k not in dropped}
+        merged["placement"] = {k: v for k, v in merged.get("placement", {}).items()
+                               if k not in dropped_place}
+        if not merged["placement"]:
+            del merged["placement"]
+        return validate_settings(merged, profile, self.state_dir / "icc")
+
+    # -- rolls, prices and costs (docs/server.md "Rolls", "Prices and costs") -------------------
+    def roll(self, name: str, body: dict | None = None) -> dict:
+        """A printer's roll: as it is (body None), or a new one loaded (`load`), what is
+        left measured (`remaining_m`), or taken off (`unload`)."""
+        w = self.printer_worker(name)
+        if body is not None:
+            if not isinstance(body, dict):
+                raise Invalid("expected a JSON object")
+            if body.get("unload") is True and len(body) == 1:
+                self.rolls.unload(name)
+            elif set(body) == {"remaining_m"}:
+                self.rolls.set_remaining(name, body["remaining_m"])
+            else:
+                self.rolls.load(name, body, w.paper_mm)
+            log.info("printer %s: roll %s", name, self.rolls.get(name))
+            self.notify()
+        return dict(printer=name, roll=self.rolls.get(name), paper_mm=w.paper_mm)
+
+    def prices(self, new=None) -> dict:
+        if new is not None:
+            return costs.write(self.state_dir, new)
+        return costs.read(self.state_dir)
+
+    def report_costs(self, job_id: int | None = None) -> dict:
+        """Every accounting row with its cost, and the totals (`GET /v1/report?costs=1`)."""
+        prices = costs.read(self.state_dir)
+        rows = self.spool.prints(job_id)
+        out = [dict(r, cost=costs.print_cost(prices, r)) for r in rows]
+        return dict(prices=prices, prints=out, totals=costs.totals(prices, rows))
+
+    def quote(self, job: dict, info: dict) -> dict:
+        """An estimate's quote: the preview's figures for all copies at the price list, with
+        the media of the roll on the job's printer."""
+        name = job.get("printed_on") or job.get("printer") or next(iter(self.workers))
+        roll = self.rolls.get(name)
+        return costs.quote(costs.read(self.state_dir), info["all_copies"],
+                           roll["media"] if roll else None)
 
     def requeue(self, job_id: int) -> dict:
         """A failed or cancelled job back in the queue, to print afresh (docs/server.md,
@@ -518,29 +642,108 @@ class PrintServer:
         return stopped
 
     def job_width_mm(self, job: dict, profile) -> float | None:
-        """How wide a job prints (its placed image or layout, mm) with `profile`; cached
-        per job and settings; None when the file cannot tell (it fails on its own)."""
-        key = (job["id"], json.dumps(job["settings"], sort_keys=True), str(profile.path))
+        """How wide a job prints (its placed image or layout, mm) with `profile`; None when
+        the file cannot tell (it fails on its own)."""
+        size = self.job_size_mm(job, profile)
+        return None if size is None else size[0]
+
+    def job_size_mm(self, job: dict, profile) -> tuple[float, float] | None:
+        """How wide and long a job prints (its placed image or layout, mm) with `profile`;
+        cached per file, settings and profile; None when the file cannot tell."""
+        key = (job.get("sha256") or job["id"], job.get("spool_path"),
+               json.dumps(job["settings"], sort_keys=True), str(profile.path))
         if key in self._widths:
             return self._widths[key]
         from ...rip.load import ImageError
         from ...rip.pipeline import RipJob
         from .validate import rip_settings
-        width = None
+        size = None
         try:
-            settings = {k: v for k, v in job["settings"].items()       # colour: no width
+            settings = {k: v for k, v in job["settings"].items()       # colour: no size
                         if k not in ("input_icc", "output_icc")}
             rip = RipJob(job["spool_path"], rip_settings(settings), profile)
             try:
-                width = rip.width * profile.k(rip.settings.dpi) / profile.counts_per_inch * 25.4
+                size = (rip.width * profile.k(rip.settings.dpi) / profile.counts_per_inch * 25.4,
+                        rip.height * profile.row_um / 1000.0)
             finally:
                 rip.close()
         except (ImageError, ValueError, OSError, TypeError):
             pass
         if len(self._widths) > 1000:
             self._widths.clear()
-        self._widths[key] = width
-        return width
+        self._widths[key] = size
+        return size
+
+    # -- fit before it fails (docs/server.md "Fit before it fails") ----------------------------
+    def fit(self, job: dict) -> dict:
+        """Whether `job` fits the paper loaded: {fits, problems, width_mm, height_mm,
+        printable_mm, roll, offers}.  The printer it asks for, or for "any" the printer
+        that fits it best.  offers: the settings changes that make it fit (fit to the
+        width, turned 90 degrees), each with the size it then prints at."""
+        names = [job["printer"]] if job.get("printer") in self.workers else list(self.workers)
+        best: dict | None = None
+        for name in names:
+            w = self.workers[name]
+            size = self.job_size_mm(job, w.profile)
+            if size is None:
+                return dict(fits=True, problems=[], printer=name, width_mm=None,
+                            height_mm=None, printable_mm=round(w.printable_mm(), 1),
+                            roll=self.rolls.get(name), offers=[])
+            width, height = size
+            printable = w.printable_mm()
+            problems = []
+            if width > printable + 1e-6:
+                problems.append(f"{job['name']} is {width:,.0f} mm wide: printer {name}'s "
+                                f"paper takes {printable:,.0f} mm (its width less the margins)")
+            n = max(1, int(job.get("copies", 1)) - int(job.get("copies_done", 0)))
+            top = float((job["settings"].get("placement") or {}).get("top_mm") or 0.0)
+            short = short_of_roll(self.rolls.get(name),
+                                  n * paper_per_copy_mm(w.profile, height, top))
+            if short:
+                problems.append(f"{job['name']} {short} on printer {name}")
+            out = dict(fits=not problems, problems=problems, printer=name,
+                       width_mm=round(width, 1), height_mm=round(height, 1),
+                       printable_mm=round(printable, 1), roll=self.rolls.get(name), offers=[])
+            if width > printable + 1e-6:
+                out["offers"] = self._fit_offers(job, w, printable)
+            if best is None or (out["fits"] and not best["fits"]):
+                best = out
+        return best  # type: ignore[return-value]
+
+    def _fit_offers(self, job: dict, w, printable: float) -> list[dict]:
+        """Settings that make a too wide job fit: scaled to the printable width; turned 90
+        degrees when its length fits across."""
+        place = dict(job["settings"].get("placement") or {})
+        offers = []
+        sizes = ("width_mm", "height_mm", "scale", "fit_width_mm")
+        turned: dict = dict(rotate=(int(place.get("rotate", 0)) + 90) % 360)
+        # a size given across the paper goes along it once turned
+        if place.get("width_mm") is not None or place.get("height_mm") is not None:
+            turned.update(width_mm=place.get("height_mm"), height_mm=place.get("width_mm"))
+        for kind, change in (("fit-to-width", dict(fit_width_mm=round(printable - 0.5, 1))),
+                             ("rotate", turned)):
+            kept = {k: v for k, v in place.items() if k not in sizes or kind == "rotate"}
+            new = dict(job["settings"], placement={k: v for k, v in dict(kept, **change).items()
+                                                   if v is not None})
+            size = self.job_size_mm(dict(job, settings=new), w.profile)
+            if size is not None and size[0] <= printable + 1e-6:
+                offers.append(dict(kind=kind, settings={"placement": change},
+                                   width_mm=round(size[0], 1), height_mm=round(size[1], 1)))
+        return offers
+
+    def check_fit(self, job: dict) -> None:
+        """Refuse a job that does not fit the loaded paper (Invalid 422 naming the file and
+        what would make it fit), unless it is forced."""
+        if job.get("force"):
+            return
+        fit = self.fit(job)
+        if fit["fits"]:
+            return
+        offers = "; ".join(f"{o['kind']} ({o['width_mm']:,.0f} x {o['height_mm']:,.0f} mm, "
+                           f"settings {json.dumps(o['settings'])})" for o in fit["offers"])
+        raise Invalid("; ".join(fit["problems"]) + (f". It fits with: {offers}" if offers else "")
+                      + ". Refused: change it, load other paper, or submit it with force "
+                      "(wideprint submit --force)", 422)
 
     def printers(self) -> list[dict]:
         out = []
@@ -558,7 +761,7 @@ class PrintServer:
                             dict(job=live.job, version=live.version),
                             state=w.printer_state, error=w.disk_wait or w.printer_error, fault=w.fault or None,
                             paused=w.paused, reason=w.pause_reason, capped=w.capped,
-                            current=cur))
+                            current=cur, roll=self.rolls.get(name)))
         return out
 
     def hot_done(self, job: dict, state: str, message: str) -> None:
@@ -587,8 +790,9 @@ class PrintServer:
                     printers=printers,
                     current=first["current"])
 
-    def report_csv(self, job_id: int | None = None) -> str:
-        return prints_csv(self.spool.prints(job_id))
+    def report_csv(self, job_id: int | None = None, with_costs: bool = False) -> str:
+        return prints_csv(self.spool.prints(job_id),
+                          costs.read(self.state_dir) if with_costs else None)
 
 
 def _unlink(path: str) -> None:

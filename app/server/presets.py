@@ -31,9 +31,16 @@ def preset_file(state_dir: Path) -> Path | None:
     return None
 
 
-def read_presets(path: Path, profile, icc_dir: Path) -> dict:
+# what a preset may say of its jobs beside their settings (docs/server.md "Presets"):
+# hold = true - its jobs are added held, to be looked at before they print, unless the
+# submission says otherwise
+JOB_DEFAULTS = ("hold",)
+
+
+def read_presets(path: Path, profile, icc_dir: Path, holds: set | None = None) -> dict:
     """One presets file ({name: settings}), every preset checked like the API's settings;
-    ValueError naming the file and the problem."""
+    ValueError naming the file and the problem.  holds: filled with the names of the
+    presets whose jobs are added held."""
     try:
         text = path.read_text()
         if path.suffix == ".toml":
@@ -53,20 +60,27 @@ def read_presets(path: Path, profile, icc_dir: Path) -> dict:
             validate_name(name)
             if name in ("done", "failed"):
                 raise Invalid("reserved for the hot folders' done/ and failed/")
+            if isinstance(settings, dict) and "hold" in settings:
+                settings = dict(settings)
+                hold = settings.pop("hold")
+                if not isinstance(hold, bool):
+                    raise Invalid("hold must be true or false")
+                if hold and holds is not None:
+                    holds.add(name)
             presets[name] = validate_settings(settings, profile, icc_dir)
         except Invalid as exc:
             raise ValueError(f"{path}: preset {name!r}: {exc}") from None
     return presets
 
 
-def load_presets(state_dir: Path, profile) -> dict:
+def load_presets(state_dir: Path, profile, holds: set | None = None) -> dict:
     """presets.toml or presets.json in the state dir ({name: settings}); written with
     the defaults on first start."""
     path = preset_file(state_dir)
     if path is None:
         path = state_dir / "presets.json"
         path.write_text(json.dumps(DEFAULT_PRESETS, indent=2) + "\n")
-    return read_presets(path, profile, state_dir / "icc")
+    return read_presets(path, profile, state_dir / "icc", holds)
 
 
 class Presets:
@@ -82,7 +96,8 @@ class Presets:
         self.state_dir, self.profile = state_dir, profile
         self._lock = threading.Lock()
         self._sig = self._signature()          # before reading: a later write is seen
-        self.current = load_presets(state_dir, profile)
+        self.held: set = set()                 # presets whose jobs are added held
+        self.current = load_presets(state_dir, profile, self.held)
         self.path = preset_file(state_dir)
         self.loaded = time.time()
         self.error = ""
@@ -119,15 +134,19 @@ class Presets:
                 if path is None:
                     raise ValueError(f"{self.state_dir}: no presets file "
                                      f"({' or '.join(PRESET_FILES)})")
-                new = read_presets(path, self.profile, self.state_dir / "icc")
+                held: set = set()
+                new = read_presets(path, self.profile, self.state_dir / "icc", held)
             except ValueError as exc:
                 self._sig, self.error = sig, f"{exc}; the presets in use are kept"
                 log.error("presets: %s", self.error)
                 raise ValueError(self.error) from None
             old, self.current = self.current, new
             self._sig, self.path, self.error = sig, path, ""
+            changed_hold = held ^ self.held
+            self.held = held
             diff = dict(added=sorted(set(new) - set(old)), removed=sorted(set(old) - set(new)),
-                        changed=sorted(n for n in set(new) & set(old) if new[n] != old[n]))
+                        changed=sorted(n for n in set(new) & set(old)
+                                       if new[n] != old[n] or n in changed_hold))
             if any(diff.values()):
                 self.loaded = time.time()      # when the presets in use took effect
         if any(diff.values()):
@@ -135,6 +154,11 @@ class Presets:
                      "; ".join(f"{k} {', '.join(v)}" for k, v in diff.items() if v))
         return diff
 
+    def holds(self, name: str | None) -> bool:
+        """Whether jobs of preset `name` are added held by default (its `hold = true`)."""
+        self.get()
+        return name is not None and name in self.held
+
     def info(self) -> dict:
         return dict(file=str(self.path) if self.path else None, names=sorted(self.current),
-                    loaded=self.loaded, error=self.error or None)
+                    loaded=self.loaded, error=self.error or None, held=sorted(self.held))

@@ -59,7 +59,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     printed_on   TEXT,                        -- the printer that took it (its checkpoint is that printer's)
     fault        TEXT NOT NULL DEFAULT '',    -- a printer fault stopped it: held until cleared
     nest_members TEXT,                        -- JSON [ids]: the jobs nested on this job's sheet
-    nested_in    INTEGER                      -- printed on that job's sheet (a nest member)
+    nested_in    INTEGER,                     -- printed on that job's sheet (a nest member)
+    force        INTEGER NOT NULL DEFAULT 0,  -- 1: the operator overrode the fit checks
+    reprint_of   INTEGER                      -- the archived job this one reprints
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -87,22 +89,41 @@ CREATE TABLE IF NOT EXISTS prints (
     resumed        INTEGER NOT NULL DEFAULT 0,-- 1: finished after a server restart
     recoveries     INTEGER NOT NULL DEFAULT 0,
     retries        INTEGER NOT NULL DEFAULT 0,
-    attempt        INTEGER NOT NULL DEFAULT 1 -- the job's attempt this copy belongs to
+    attempt        INTEGER NOT NULL DEFAULT 1,-- the job's attempt this copy belongs to
+    printer        TEXT,                      -- the printer it printed on
+    media          TEXT,                      -- the roll loaded on it then (rolls.py)
+    paper_mm       REAL NOT NULL DEFAULT 0    -- paper fed by the copy (taken off the roll)
 );
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
+CREATE TABLE IF NOT EXISTS rolls (
+    printer        TEXT PRIMARY KEY,          -- the roll loaded on this printer (rolls.py)
+    media          TEXT NOT NULL,             -- a media library name (app/medialib.py)
+    width_mm       REAL,                      -- from the paper sensor (NULL: not measured yet)
+    length_mm      REAL,                      -- as loaded (entered or from its label), NULL: unknown
+    remaining_mm   REAL,                      -- length less every feed since (NULL: unknown)
+    loaded         REAL NOT NULL,
+    label          TEXT NOT NULL DEFAULT ''
+);
 """
 
-SCHEMA_VERSION = "5"
+SCHEMA_VERSION = "6"
 # columns added since schema 1: (table, column, definition), added to older databases;
 # schema 4: several printers (printer, printed_on), a fault stops a job (fault); schema 5:
-# the server nests jobs on one sheet (nest_members on the sheet's job, nested_in on the others)
+# the server nests jobs on one sheet (nest_members on the sheet's job, nested_in on the others);
+# schema 6: fit override and reprints (force, reprint_of), rolls (the rolls table; a print's
+# printer, media and paper fed)
 ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("prints", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("jobs", "printer", "TEXT"),
                  ("jobs", "printed_on", "TEXT"),
                  ("jobs", "fault", "TEXT NOT NULL DEFAULT ''"),
                  ("jobs", "nest_members", "TEXT"),
-                 ("jobs", "nested_in", "INTEGER"))
+                 ("jobs", "nested_in", "INTEGER"),
+                 ("jobs", "force", "INTEGER NOT NULL DEFAULT 0"),
+                 ("jobs", "reprint_of", "INTEGER"),
+                 ("prints", "printer", "TEXT"),
+                 ("prints", "media", "TEXT"),
+                 ("prints", "paper_mm", "REAL NOT NULL DEFAULT 0"))
 # columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
 # carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
 RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
@@ -223,9 +244,12 @@ class Spool:
     def add_job(self, *, name: str, source: str, spool_path: str, size: int, sha256: str,
                 settings: dict, preset: str | None = None, copies: int = 1, priority: int = 0,
                 hold: bool = False, key: str | None = None, client: str | None = None,
-                hot_path: str | None = None, printer: str | None = None) -> tuple[dict, bool]:
+                hot_path: str | None = None, printer: str | None = None, force: int = 0,
+                reprint_of: int | None = None) -> tuple[dict, bool]:
         """Queue a job; returns (job, created).  With a key already used the existing job
-        is returned (created False): a client's retry never makes a second job."""
+        is returned (created False): a client's retry never makes a second job.  force: the
+        operator overrode the fit checks (docs/server.md "Fit before it fails");
+        reprint_of: the archived job this one prints again ("Archive and reprint")."""
         with self.tx() as c:
             if key is not None:
                 row = c.execute("SELECT * FROM jobs WHERE key=?", (key,)).fetchone()
@@ -233,11 +257,12 @@ class Spool:
                     return _job_dict(row), False
             cur = c.execute(
                 "INSERT INTO jobs (key, name, source, client, spool_path, size, sha256, preset,"
-                " settings, copies, priority, state, hot_path, submitted, printer)"
-                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " settings, copies, priority, state, hot_path, submitted, printer, force,"
+                " reprint_of) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (key, name, source, client, spool_path, size, sha256, preset,
                  json.dumps(settings, sort_keys=True), copies, priority,
-                 "held" if hold else "queued", hot_path, time.time(), printer))
+                 "held" if hold else "queued", hot_path, time.time(), printer, int(force),
+                 reprint_of))
             row = c.execute("SELECT * FROM jobs WHERE id=?", (cur.lastrowid,)).fetchone()
         return _job_dict(row), True
 
@@ -458,7 +483,19 @@ class Spool:
             c.execute("UPDATE jobs SET state='held' WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
-    def release(self, job_id: int) -> dict:
+    def hold_for_roll(self, job_id: int, message: str) -> dict | None:
+        """The loaded roll cannot hold the job (docs/server.md "Rolls"): queued -> held with
+        the reason, before a stroke of it is printed; None when it is no longer queued."""
+        with self.tx() as c:
+            n = c.execute("UPDATE jobs SET state='held', message=? WHERE id=? AND "
+                          "state='queued' AND interrupted=0", (message, job_id)).rowcount
+            if not n:
+                return None
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def release(self, job_id: int, force: bool = False) -> dict:
+        """held -> queued; force: the operator overrides the fit checks for it (a roll that
+        holds more than the server knows, a job meant to run over the edge)."""
         with self.tx() as c:
             job = self._get_for_change(c, job_id)
             if job["state"] == "queued":
@@ -469,7 +506,8 @@ class Spool:
                 raise SpoolError(f"job {job_id} was stopped by a printer fault ({job['fault']}): "
                                  f"clear the fault on printer {job['printed_on'] or 'main'} "
                                  f"to resume it or fail it")
-            c.execute("UPDATE jobs SET state='queued' WHERE id=?", (job_id,))
+            c.execute("UPDATE jobs SET state='queued', force=MAX(force, ?) WHERE id=?",
+                      (int(force), job_id))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
     def edit(self, job_id: int, *, settings: dict | None = None, copies: int | None = None,
@@ -526,7 +564,8 @@ class Spool:
         with self.tx() as c:
             job = self._get_for_change(c, job_id)
             if job["state"] not in ("failed", "cancelled"):
-                hint = "; submit the file again to reprint it" if job["state"] == "done" else ""
+                hint = (f"; reprint it (wideprint reprint {job_id})" if job["state"] == "done"
+                        else "")
                 raise SpoolError(f"job {job_id} is {job['state']}: only a failed or cancelled "
                                  f"job can be requeued{hint}")
             path = job["spool_path"]
@@ -550,6 +589,23 @@ class Spool:
                       "interrupted=0, started=NULL, finished=NULL, copy_started=NULL, "
                       "hot_path=NULL WHERE id=?", (job_id,))
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def expire_archive(self, before: float, max_bytes: int | None) -> list[str]:
+        """The archive's retention (docs/server.md "Archive and reprint"): done jobs keep
+        their spool copy until `before`, and only the newest that fit in `max_bytes`
+        together; the others forget it (no reprint).  Returns the paths to delete."""
+        with self.tx() as c:
+            rows = c.execute("SELECT id, spool_path, size, finished FROM jobs WHERE state='done' "
+                             "AND spool_path IS NOT NULL ORDER BY finished DESC, id DESC").fetchall()
+            gone, total = [], 0
+            for r in rows:                   # newest first: the oldest go when over size
+                if r["finished"] is None or r["finished"] < before or \
+                        (max_bytes is not None and total + int(r["size"]) > max_bytes):
+                    gone.append(r)
+                else:
+                    total += int(r["size"])
+            c.executemany("UPDATE jobs SET spool_path=NULL WHERE id=?", [(r[0],) for r in gone])
+        return [r[1] for r in gone]
 
     def expire_copies(self, before: float) -> list[str]:
         """Forget the spool copies of jobs that failed or were cancelled before `before`
@@ -616,6 +672,12 @@ class Spool:
         if row:
             c.execute(f"INSERT INTO prints ({', '.join(row)}) VALUES ({','.join('?' * len(row))})",
                       tuple(row.values()))
+            if row.get("paper_mm") and row.get("printer"):
+                # the paper this copy fed comes off the printer's roll in the same
+                # transaction (docs/server.md "Rolls"): a crash keeps both or neither
+                c.execute("UPDATE rolls SET remaining_mm=MAX(0, remaining_mm - ?) WHERE "
+                          "printer=? AND remaining_mm IS NOT NULL",
+                          (float(row["paper_mm"]), row["printer"]))
 
     def prints(self, job_id: int | None = None) -> list[dict]:
         if job_id is None:

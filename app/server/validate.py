@@ -101,7 +101,8 @@ def job_rip_settings(settings: dict, profile, state_dir: Path):
     return rip_settings(mapping), profile
 
 
-JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer"}
+JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer",
+            "force"}
 
 
 def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
@@ -115,7 +116,7 @@ def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
         raise Invalid(f"unknown field {sorted(unknown)[0]!r} (known: {', '.join(sorted(JOB_KEYS))})")
     if "name" not in raw:
         raise Invalid("name is required")
-    req = {"name": validate_name(raw["name"])}
+    req: dict = {"name": validate_name(raw["name"])}
     printer = raw.get("printer")
     if printer in (None, "any"):
         printer = None
@@ -133,6 +134,10 @@ def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
     if not isinstance(hold, bool):
         raise Invalid("hold must be true or false")
     req["hold"] = hold
+    force = raw.get("force", False)             # past the fit checks (docs/server.md)
+    if not isinstance(force, bool):
+        raise Invalid("force must be true or false")
+    req["force"] = force
     for k, limit in (("key", 200), ("client", 100)):
         v = raw.get(k)
         if v is not None and (not isinstance(v, str) or not 0 < len(v) <= limit or

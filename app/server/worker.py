@@ -67,6 +67,8 @@ class Worker(threading.Thread):
         self._test_ids = 0
         self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
+        self._steps0: int | None = None    # the paper's position when this copy's run began
+        self._fed_by = None                # the PrintJob whose telemetry tells where it is now
 
     # -- recording state changes on a disk that may be full ----------------------------------
     def _durable(self, write, what: str):
@@ -201,8 +203,12 @@ class Worker(threading.Thread):
                                 strokes_total=0, strokes_printed=0, resumed=False)
             self.printer_state = "printing"
             pj = PrintJob(self._device(), rip, job_id=job_id, head_care=self._care())
-            self.job = pj
-            rep = pj.run()
+            self.job = self._fed_by = pj
+            self._steps0 = self._paper_steps(self._device())
+            try:
+                rep = pj.run()
+            finally:                         # a test print's paper comes off the roll too
+                self.srv.rolls.used(self.name_, self._paper_fed_mm())
             media = self.srv.config.media_dir
             path = media / f"testprint-{self._test_ids}.tif" if media else None
             result.update(state="done", report=rep.as_dict(),
@@ -367,6 +373,37 @@ class Worker(threading.Thread):
             req["done"].set()
 
     def _next_job(self) -> dict | None:
+        """The next job for this printer (`_pick_job`), unless the loaded roll cannot hold
+        what is left of it: such a job is held, with the reason, before a stroke of it is
+        printed, and the next is taken (docs/server.md "Rolls").  A job started already, a
+        nested sheet and one the operator forced are not held."""
+        while True:
+            job = self._pick_job()
+            if job is None or job["interrupted"] or job.get("force") or job.get("nest_members"):
+                return job
+            short = self.roll_short(job)
+            if not short:
+                return job
+            msg = (f"{job['name']}: {short}: held before printing; load a new roll "
+                   f"(wideprint printer roll load) and release it, or release it with --force")
+            if self.spool.hold_for_roll(job["id"], msg) is not None:
+                log.warning("printer %s: job %s %s", self.name_, job["id"], msg)
+
+    def roll_short(self, job: dict, copies: int | None = None) -> str:
+        """Why this printer's roll cannot hold `copies` (default: the job's copies left) of
+        `job`; '' when it can or nobody knows (no roll length, a file that cannot tell)."""
+        from .rolls import paper_per_copy_mm, short_of_roll
+        roll = self.srv.rolls.get(self.name_)
+        if roll is None or roll.get("remaining_mm") is None:
+            return ""
+        size = self.srv.job_size_mm(job, self.profile)
+        if size is None:
+            return ""
+        n = copies if copies is not None else max(1, job["copies"] - job["copies_done"])
+        top = float((job["settings"].get("placement") or {}).get("top_mm") or 0.0)
+        return short_of_roll(roll, n * paper_per_copy_mm(self.profile, size[1], top))
+
+    def _pick_job(self) -> dict | None:
         """The next job for this printer: its own, or one for any printer whose width its
         paper holds.  An "any" job too wide for this paper is left for a printer whose
         paper is wide enough; when no printer's paper holds it, the first free printer
@@ -441,6 +478,10 @@ class Worker(threading.Thread):
             return
         if p.present:
             self.paper_mm = (p.right_counts - p.left_counts) / self.profile.counts_per_inch * 25.4
+            try:
+                self.srv.rolls.measured(self.name_, self.paper_mm)
+            except Exception:  # noqa: BLE001 - the roll's width is shown, never needed
+                log.debug("printer %s: the roll's width not recorded", self.name_, exc_info=True)
 
     def _device(self):
         if self.dev is None:
@@ -505,6 +546,7 @@ class Worker(threading.Thread):
                 job = self.spool.get(job_id)
                 resumed = False
             self.current.update(copy=copy, state="ripping", stroke_index=None, strokes_printed=0)
+            self._steps0, self._fed_by = None, None
             cp = job["checkpoint"] if first else None
             first = False
             started = job["copy_started"] or time.time()
@@ -548,6 +590,7 @@ class Worker(threading.Thread):
                                  self._print_row(job, copy, started, None, "failed", msg, resumed))
                     return
                 epoch = job.get("epoch") or self.spool.epoch(self.name_)
+                self._steps0 = self._paper_steps(dev)
 
                 def on_event(kind, **kw):
                     cur = self.current
@@ -565,7 +608,7 @@ class Worker(threading.Thread):
 
                 pj = PrintJob(dev, rip, job_id=job_id, on_event=on_event, resume=cp,
                               head_care=self._care())
-                self.job = pj
+                self.job = self._fed_by = pj
                 if job_id in self._cancel:
                     pj.control.cancel()
                 if self.stopping:
@@ -687,6 +730,12 @@ class Worker(threading.Thread):
         the job, which ends again and finds nothing to move; one after the commit would
         leave an original to be taken as a new job), then one transaction with its last
         copy's row and the jobs on its nested sheet, then the spool copies deleted."""
+        if job.get("spool_path") and message and not message.startswith(f"{job['name']}:"):
+            # the operator knows the file by its name, never by its spool copy's (a message
+            # that names the file first may name its copy too: a damaged copy's)
+            message = message.replace(job["spool_path"], job["name"])
+            if row is not None:
+                row = dict(row, message=row["message"].replace(job["spool_path"], job["name"]))
         members = [m for m in self.spool.members(job)
                    if m["state"] not in ("done", "failed", "cancelled")]
         words = {m["id"]: (f"on job {job['id']}'s nested sheet: {message}" if message
@@ -713,23 +762,49 @@ class Worker(threading.Thread):
             log.info("job %s %s %s", m["id"], state, words[m["id"]])
         log.info("job %s %s %s", job["id"], state, message)
 
+    @staticmethod
+    def _paper_steps(dev) -> int | None:
+        """Where the paper is (feed steps), or None when the printer does not say."""
+        try:
+            return int(dev.link.status().paper_steps)
+        except Exception:  # noqa: BLE001 - the roll's count is kept when it can be
+            return None
+
+    def _paper_fed_mm(self) -> float:
+        """The paper this copy's run fed (docs/server.md "Rolls"): the printer's paper
+        position now (as last read by the job) less where it was when the run began."""
+        pj, s0 = self._fed_by, self._steps0
+        if pj is None or s0 is None:
+            return 0.0
+        steps = int(pj.telemetry.paper_steps) - s0
+        return round(max(0, steps) * self.profile.feed_um_per_step / 1000.0, 3)
+
     def _print_row(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
                    resumed: bool) -> dict:
         """A copy's accounting row (docs/server.md "Accounting"), committed by the job's
-        state change that ends the copy."""
+        state change that ends the copy.  The area is what was printed: the image's area for
+        a done copy, its strokes' share of it for one that stopped part-way - 0 m² when no
+        stroke reached the sheet (a job refused by the printer is never billed media)."""
         prof = self.profile
         ended = time.time()
         r = rep.as_dict() if rep is not None else {}
         drops = [int(d) for d in r.get("drops", [0, 0, 0, 0])]
         pl = prof.drop_volume_pl
+        total, printed = int(r.get("strokes_total", 0)), int(r.get("strokes_printed", 0))
+        area = float(r.get("area_m2", 0.0))
+        if outcome != "done":
+            area = area * min(1.0, printed / total) if total and printed else 0.0
+        roll = self.srv.rolls.get(self.name_)
         row = dict(job_id=job["id"], copy=copy, file=job["name"], source=job["source"],
                    preset=job["preset"], settings=json.dumps(job["settings"], sort_keys=True),
                    started=started, ended=ended, duration_s=round(ended - started, 3),
-                   strokes_total=r.get("strokes_total", 0), strokes_printed=r.get("strokes_printed", 0),
+                   strokes_total=total, strokes_printed=printed,
                    width_dots=r.get("width_dots", 0), height_rows=r.get("height_rows", 0),
-                   area_m2=r.get("area_m2", 0.0), outcome=outcome, message=message,
+                   area_m2=round(area, 10), outcome=outcome, message=message,
                    resumed=int(bool(resumed)), recoveries=r.get("recoveries", 0),
-                   retries=r.get("retries", 0), attempt=job["attempt"])
+                   retries=r.get("retries", 0), attempt=job["attempt"], printer=self.name_,
+                   media=roll["media"] if roll else None,
+                   paper_mm=self._paper_fed_mm() if rep is not None else 0.0)
         for c, d in zip(COLORS, drops):
             row[f"drops_{c}"] = d
             row[f"ink_{c}_ml"] = round(d * pl * 1e-9, 12)

@@ -232,6 +232,18 @@ SLOW: dict[str, set[str] | str] = {
         "test_printer_commands_on_the_in_process_emulator",  # 1.9
     },
     "test_printers.py": ALL,  # 16 s in all
+    "test_rolls.py": {
+        "test_a_job_wider_than_the_paper_is_refused_naming_the_file_and_forced_is_billed_nothing",  # 3.8
+        "test_every_feed_comes_off_the_roll_and_a_job_it_cannot_hold_is_held_not_half_printed",  # 4.0
+        "test_printer_roll_commands",  # 0.8
+    },
+    "test_archive.py": {
+        "test_hold_by_preset_then_release_with_estimate_and_quote",  # 6.9
+        "test_a_done_job_is_reprinted_bit_exact_and_with_changed_settings",  # 4.8
+    },
+    "test_costs.py": {
+        "test_report_costs_from_a_stated_price_list",  # 5.5
+    },
     "test_rtl.py": {
         "test_decoding_speed_is_per_row_not_per_pixel",  # 1.3
         "test_cli_prints_rtl_by_content_whatever_its_name",  # 2.4

@@ -1,0 +1,148 @@
+"""The roll loaded on each printer (docs/server.md "Rolls"): its media (a media library name,
+app/medialib.py), its width (the printer's paper sensor), its length (entered, or read from
+the roll's label) and what is left of it - every copy's paper feed comes off it in the
+transaction that records the copy (Spool._add_print), test prints' too.
+
+A job the roll cannot hold is refused at submission and, when the roll ran down since,
+held before its first stroke (worker.py), never half printed: the operator loads a new roll
+or releases it with the override.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+
+from .validate import Invalid
+
+ROLL_KEYS = {"media", "length_m", "label", "remaining_m", "width_mm"}
+# a roll's label as its barcode or the operator reads it: `media=vinyl-300 length=50m`
+# (length in m, or mm with the unit), separated by blanks, ';' or ','
+LABEL_FIELD = re.compile(r"^(media|length|width)=(\S+)$")
+
+
+def parse_length_m(text: str, what: str = "length") -> float:
+    """'50', '50m', '50000mm', '50.5 m' -> metres; Invalid otherwise."""
+    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]+)?)\s*(m|mm|cm)?\s*", str(text))
+    if not m:
+        raise Invalid(f"{what} {text!r}: expected metres, e.g. 50 or 50m or 50000mm")
+    v = float(m.group(1)) * {"m": 1.0, None: 1.0, "cm": 0.01, "mm": 0.001}[m.group(2)]
+    if not 0 < v <= 10_000:
+        raise Invalid(f"{what} {text!r}: a roll is 0..10,000 m long")
+    return v
+
+
+def parse_label(label: str) -> dict:
+    """The fields of a roll's label: {media, length_m, width_mm} (those it has)."""
+    out: dict = {}
+    for part in re.split(r"[\s;,]+", label.strip()):
+        if not part:
+            continue
+        m = LABEL_FIELD.match(part)
+        if not m:
+            raise Invalid(f"roll label: {part!r} is not media=NAME, length=M or width=MM")
+        key, value = m.groups()
+        if key == "media":
+            out["media"] = value
+        elif key == "length":
+            out["length_m"] = parse_length_m(value)
+        else:
+            out["width_mm"] = parse_length_m(value + ("" if value.endswith("m") else "mm"),
+                                             "width") * 1000
+    return out
+
+
+def _roll_dict(row) -> dict | None:
+    if row is None:
+        return None
+    d = dict(row)
+    d["remaining_m"] = None if d["remaining_mm"] is None else round(d["remaining_mm"] / 1000, 3)
+    d["length_m"] = None if d["length_mm"] is None else round(d["length_mm"] / 1000, 3)
+    return d
+
+
+class Rolls:
+    """The rolls table of the queue's database (spool.py's schema)."""
+
+    def __init__(self, spool, library=None):
+        self.spool, self.library = spool, library      # the server's media library folder
+
+    def get(self, printer: str) -> dict | None:
+        return _roll_dict(self.spool.db.execute("SELECT * FROM rolls WHERE printer=?",
+                                                (printer,)).fetchone())
+
+    def load(self, printer: str, body: dict, width_mm: float | None) -> dict:
+        """A new roll on `printer` (the API's body: media, length_m or label, width_mm when
+        the printer has not measured it); its remaining length is its length."""
+        if not isinstance(body, dict) or set(body) - ROLL_KEYS:
+            raise Invalid(f"expected an object with some of {', '.join(sorted(ROLL_KEYS))}")
+        label = body.get("label") or ""
+        if not isinstance(label, str) or len(label) > 200:
+            raise Invalid("label must be a string of at most 200 characters")
+        fields = parse_label(label) if label else {}
+        media = body.get("media", fields.get("media"))
+        if not isinstance(media, str) or not media:
+            raise Invalid("media is required (a name from the media library: wideprint media list)")
+        from ..medialib import check_name, find
+        try:
+            find(check_name(media), self.library)
+        except (ValueError, KeyError, FileNotFoundError, OSError) as exc:
+            raise Invalid(f"media {media!r}: {exc}") from None
+        length = body.get("length_m", fields.get("length_m"))
+        if length is not None:
+            length = parse_length_m(length)
+        width = body.get("width_mm", fields.get("width_mm", width_mm))
+        if width is not None and (isinstance(width, bool) or not isinstance(width, (int, float))
+                                  or not 10 <= width <= 5000):
+            raise Invalid("width_mm must be a number of 10..5000")
+        mm = None if length is None else length * 1000
+        with self.spool.tx() as c:
+            c.execute("INSERT OR REPLACE INTO rolls (printer, media, width_mm, length_mm, "
+                      "remaining_mm, loaded, label) VALUES (?,?,?,?,?,?,?)",
+                      (printer, media, width, mm, mm, time.time(), label))
+        return self.get(printer)  # type: ignore[return-value]
+
+    def set_remaining(self, printer: str, remaining_m) -> dict:
+        """The operator measured what is left (a roll taken off and put back)."""
+        mm = parse_length_m(remaining_m, "remaining") * 1000
+        with self.spool.tx() as c:
+            n = c.execute("UPDATE rolls SET remaining_mm=?, length_mm=MAX(COALESCE(length_mm, 0), ?) "
+                          "WHERE printer=?", (mm, mm, printer)).rowcount
+        if not n:
+            raise Invalid(f"printer {printer}: no roll loaded (load one first)", 409)
+        return self.get(printer)  # type: ignore[return-value]
+
+    def unload(self, printer: str) -> None:
+        with self.spool.tx() as c:
+            c.execute("DELETE FROM rolls WHERE printer=?", (printer,))
+
+    def measured(self, printer: str, width_mm: float) -> None:
+        """The paper sensor's width, kept with the roll."""
+        with self.spool.tx() as c:
+            c.execute("UPDATE rolls SET width_mm=? WHERE printer=?", (round(width_mm, 2), printer))
+
+    def used(self, printer: str, paper_mm: float) -> None:
+        """Paper fed outside a job (a test print)."""
+        if paper_mm > 0:
+            with self.spool.tx() as c:
+                c.execute("UPDATE rolls SET remaining_mm=MAX(0, remaining_mm - ?) WHERE "
+                          "printer=? AND remaining_mm IS NOT NULL", (paper_mm, printer))
+
+
+def paper_per_copy_mm(profile, height_mm: float, top_mm: float = 0.0) -> float:
+    """The paper one copy feeds (docs/server.md "Rolls"): the blank `top_mm` before its
+    image (placement), the image's length and the swath fed out past the heads after it
+    (driver/job.py, "feed the last rows out")."""
+    swath = profile.swath_rows * profile.row_um / 1000.0
+    return float(top_mm) + height_mm + swath
+
+
+def short_of_roll(roll: dict | None, need_mm: float) -> str:
+    """Why the roll cannot hold `need_mm` of paper ('' when it can, or nobody knows)."""
+    if roll is None or roll.get("remaining_mm") is None:
+        return ""
+    left = float(roll["remaining_mm"])
+    if need_mm <= left:
+        return ""
+    return (f"needs {need_mm / 1000:,.2f} m of paper, the {roll['media']} roll has "
+            f"{left / 1000:,.2f} m left")
