@@ -501,6 +501,9 @@ def cmd_print(args) -> int:
                       + (f", scan {shown(rep['scan'])}" if rep.get("scan") else "")
                       + (f", spectro {shown(rep['spectro'])}" if rep.get("spectro") else ""),
                       file=say)
+                if rep.get("spots"):                # docs/spot.md "The job's report"
+                    from .spot_cli import summary
+                    print(f"{shown(f, NAME_LIMIT)}: spots: {shown(summary(rep['spots']), 400)}", file=say)
                 if rip.layout is not None:
                     from ..rip.layout import layout_line
                     rep["files"] = [f, *extras[i]]

@@ -224,6 +224,21 @@ def cmd_pick(args) -> int:
     return EXIT_OK
 
 
+def summary(spots: list[dict]) -> str:
+    """A job's spots in one line: `Brand Red (library, ΔE 0.4), CutContour (cut: not printed)`."""
+    parts = []
+    for sp in spots:
+        how = sp.get("resolved", "?")
+        if how == "cut":
+            parts.append(f"{sp['name']} (cut: not printed)")
+        elif sp.get("de2000") is not None:
+            parts.append(f"{sp['name']} ({how}, ΔE {sp['de2000']:.1f}"
+                         + ("" if sp.get("in_gamut", True) else ", out of gamut") + ")")
+        else:
+            parts.append(f"{sp['name']} ({how})")
+    return ", ".join(parts)
+
+
 def cmd_spot(args) -> int:
     from .argyll import ArgyllError
     try:

@@ -103,9 +103,10 @@ def parse_text(text: str, where: str = "text") -> list[Spot]:
             raise ValueError(f"{where}:{i}: not 'NAME: L a b': {s[:80]!r}")
         name = _check_spot_name(m.group(1), f"{where}:{i}")
         try:
-            lab = _check_lab(name, [float(v) for v in m.group(2, 3, 4)], f"{where}:{i}")
-        except ValueError as e:
-            raise ValueError(str(e)) from None
+            values = [float(v) for v in m.group(2, 3, 4)]
+        except ValueError:
+            raise ValueError(f"{where}:{i}: {name!r}: L a b are not numbers: {s[:80]!r}") from None
+        lab = _check_lab(name, values, f"{where}:{i}")
         out.append(Spot(name, lab))
     return out
 

@@ -28,7 +28,7 @@ class SpotUse:
     names: dict[str, str] = field(default_factory=dict)     # name -> separation | devicen | cut
 
     def add(self, name: str, kind: str) -> None:
-        if name in NONE_NAMES:
+        if name in NONE_NAMES or (kind == "devicen" and name.casefold() in PROCESS):
             return
         if is_cut_name(name):
             kind = "cut"
@@ -151,7 +151,7 @@ def _type4(recipes: list[tuple[float, ...]]) -> bytes:
             ops.append("0")
         else:
             ops.append("dup 1 gt { pop 1 } if")
-    ops.append(f"4 {n + 4} roll" if n else "")
+    ops.append(f"{n + 4} 4 roll" if n else "")       # the inks under the tints, then drop those
     ops += ["pop"] * n
     return ("{ " + " ".join(o for o in ops if o) + " }").encode()
 

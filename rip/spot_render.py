@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from .color import DEFAULT_OUTPUT_ICC
 from .load import ImageError
 from .spot import DEFAULT_MEDIA, SpotBook
+from .spot_pdf import PROCESS
 
 __all__ = ["SpotPlan", "prepare"]
 
@@ -74,14 +75,15 @@ def prepare(path: str, fmt: str, settings, names: dict[str, str] | None = None,
             book: SpotBook | None = None) -> SpotPlan:
     """The spot plan of a job.  `names`: the spot names a PostScript/EPS probe saw
     (name -> kind); PDF files are read here."""
-    from .spot_pdf import rewrite, spot_names
+    from .spot_pdf import rewrite, spot_names     # pikepdf is loaded only for documents
     if fmt == "pdf":
         try:
             names = spot_names(path).names
         except Exception as e:      # pikepdf refused a file Ghostscript may still read
             return SpotPlan(path, fmt, [{"name": "?", "resolved": "alternate",
                                          "message": f"spot colours not read: {e}"}])
-    names = names or {}
+    names = {n: k for n, k in (names or {}).items()       # a DeviceN's process inks are no spots
+             if not (k == "devicen" and n.casefold() in PROCESS)}
     if not names:
         return SpotPlan(path, fmt)
     book = book or SpotBook()

@@ -255,7 +255,7 @@ def test_a_cut_line_neither_prints_nor_knocks_out(spots_dir, tmp_path):
     assert np.array_equal(under, above)
 
 
-def test_printed_spots_measure_within_2_de2000_and_the_cut_line_drops_nothing(spots_dir, tmp_path):
+def test_printed_spots_measure_within_2_de2000_and_the_cut_line_drops_nothing(spots_dir, tmp_path, capsys):
     """The issue's must-show: on the emulator through the default media (vinyl-300), the
     spectrophotometer reads each library spot within ΔE2000 2 of its Lab; no drop lands
     under the 3 mm CutContour line; the report lists every spot and how it printed."""
@@ -264,6 +264,8 @@ def test_printed_spots_measure_within_2_de2000_and_the_cut_line_drops_nothing(sp
     media, lab, report = tmp_path / "m.tif", tmp_path / "lab.tif", tmp_path / "r.json"
     assert main(["print", str(pdf), "--media-out", str(media), "--spectro-out", str(lab),
                  "--report", str(report)]) == 0
+    said = capsys.readouterr().out
+    assert "spots: Brand Red (library, ΔE 0." in said and "CutContour (cut: not printed)" in said
     rep = json.loads(report.read_text())[0]
     by = {s["name"]: s for s in rep["spots"]}
     assert {n: by[n]["resolved"] for n in by} == {"Brand Red": "library", "Brand Teal": "library",
@@ -303,6 +305,32 @@ def test_swatch_book_round_trip(spots_dir, capsys):
     assert "patch 3 stored" in capsys.readouterr().out
     assert main(["spot", "forget", "Brand Red"]) == 0
     assert book.resolve("Brand Red", "vinyl-300", DEFAULT_OUTPUT_ICC).resolved == "library"
+
+
+def test_devicen_mixes_library_recipes_and_process_inks(spots_dir, tmp_path):
+    """A DeviceN of a library colour and Black prints the recipe plus the black tint; one
+    with a colorant in no library keeps its alternate."""
+    book = _brand_library(spots_dir)
+    pdf = pikepdf.new()
+    page = pdf.add_blank_page(page_size=(144, 72))
+    fn = pdf.make_stream(b"{ pop pop 0 0 0 1 }")          # the designer's alternate: black
+    fn.FunctionType, fn.Domain, fn.Range = 4, [0, 1, 0, 1], [0, 1] * 4
+
+    def devicen(*names):
+        return pikepdf.Array([pikepdf.Name.DeviceN, pikepdf.Array([pikepdf.Name("/" + n) for n in names]),
+                              pikepdf.Name.DeviceCMYK, fn])
+    page.Resources = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(
+        D0=devicen("Brand Red", "Black"), D1=devicen("Brand Teal", "Unknown X")))
+    page.Contents = pdf.make_stream(b"/D0 cs 1 0.5 scn 0 0 72 72 re f /D1 cs 1 1 scn 72 0 72 72 re f")
+    path = tmp_path / "devicen.pdf"
+    pdf.save(path)
+    img, spots = _raster(path)
+    assert {s["name"]: s["resolved"] for s in spots} == {"Brand Red": "library", "Brand Teal": "library",
+                                                         "Unknown X": "alternate"}
+    h, w = img.shape[:2]
+    red = np.array(book.resolve("Brand Red", "vinyl-300", DEFAULT_OUTPUT_ICC).cmyk) + [0, 0, 0, 0.5]
+    assert np.abs(img[h // 2, w // 4] - red * 255).max() <= 1
+    assert list(img[h // 2, 3 * w // 4]) == [0, 0, 0, 255]
 
 
 def test_postscript_spots_go_the_same_way(spots_dir, tmp_path):
