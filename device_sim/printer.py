@@ -50,7 +50,7 @@ class Printer:
                  scan_path: str | Callable[[int], str | None] | None = None,
                  scan_dpi: float = 1200,
                  spectro_path: str | Callable[[int], str | None] | None = None,
-                 spectro_dpi: float = 50):
+                 spectro_dpi: float = 50, keep_events: int = 200_000):
         self.profile = profile or load_profile()
         self.faults = faults or Faults()
         prof = self.profile
@@ -128,7 +128,10 @@ class Printer:
         # the 128-bit words each head latched, per stroke, in firing order (tests, --latched-out)
         self.record_latched = record_latched
         self.latched: dict[int, list] = {}
-        self.events: deque = deque(maxlen=200_000)
+        # the last `keep_events` events for tests and reports (~500 B each): a command's
+        # job keeps them all; a print server's emulator, which runs for days and is polled
+        # while idle, keeps fewer (app/server/worker.py)
+        self.events: deque = deque(maxlen=keep_events)
         # the service station and the ink's drying (docs/protocol.md 2.9)
         self.service = ServiceStation(self, self.n_heads, prof.nozzles, prof.maintenance,
                                       self.faults)

@@ -17,6 +17,11 @@ from .ports import WorkerHost  # what it sees of the server (core.py composes it
 from .spool import COLORS, disk_full
 from .validate import job_rip_settings
 
+#: events an in-process emulator keeps (device_sim/printer.py): its deque of 200,000 took
+#: ~100 MB per printer in the 30-minute GUI soak (it is polled while idle); 20,000 is ~10 MB
+#: and still holds a long job's events
+EMULATOR_EVENTS_KEPT = 20_000
+
 log = logging.getLogger("wideprint.server")
 
 # printer job ids of test prints: above every spool job id (docs/server.md, "Test prints")
@@ -497,7 +502,8 @@ class Worker(threading.Thread):
                 from ..livemedia import LiveMedia
                 self.live = LiveMedia()
             self.dev = open_device(self.printer.device, self.profile, inject=inject,
-                                   media_path=media_path, live=self.live if emulated else None)
+                                   media_path=media_path, live=self.live if emulated else None,
+                                   **({"keep_events": EMULATOR_EVENTS_KEPT} if emulated else {}))
         return self.dev
 
     def _drop_device(self) -> None:
