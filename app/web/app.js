@@ -140,9 +140,13 @@ async function refreshAll() {
 async function refreshHistory() {
   const h = await api("GET", "/v1/jobs?state=done,failed,cancelled&newest=1&limit=100");
   showHistory(h.jobs);
-  const rep = await api("GET", "/v1/report");
+  // with the price list's costs where the server prices prints (docs/server.md "Prices
+  // and costs"), else the plain accounting
+  let rep;
+  try { rep = await api("GET", "/v1/report?costs=1"); }
+  catch (e) { if (e.status !== 400) throw e; rep = await api("GET", "/v1/report"); }
   const all = await api("GET", "/v1/jobs?state=done,failed,cancelled&newest=1&limit=2000");
-  showAccounting(rep.prints, all.jobs);
+  showAccounting(rep.prints, all.jobs, rep.prices && rep.prices.currency);
 }
 
 // -- pieces ----------------------------------------------------------------------------------
@@ -346,7 +350,8 @@ function cost(row) {
   return null;
 }
 
-function showAccounting(rows, jobs) {
+function showAccounting(rows, jobs, currency) {
+  for (const th of document.querySelectorAll(".figures th.cost")) th.textContent = currency ? `Cost (${currency})` : "Cost";
   const owner = new Map(jobs.map((j) => [j.id, j.owner || j.client || j.source || ""]));
   const group = (keyOf) => {
     const m = new Map();

@@ -295,8 +295,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_every_dot_fired_once_by_a_live_nozzle",  # 4.9
     },
     "test_web.py": {
-        "test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints",  # 19
-        "test_a_user_session_has_the_users_role_and_ends_when_the_user_is_removed",  # 2.2
+        "test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints",  # 12.4
     },
 }
 
