@@ -806,6 +806,8 @@ def build_parser() -> argparse.ArgumentParser:
     from .server_cli import add_parser as add_server_parsers
     add_server_parsers(sub)       # serve, submit, queue, cancel, hold, release, requeue, status,
     #                               presets, report
+    from .cups_cli import add_parser as add_cups_parser
+    add_cups_parser(sub)          # cups install|uninstall|status (docs/ipp.md "CUPS queues")
 
     p = sub.add_parser("completion", help="print a shell completion script (bash, zsh, tcsh)",
                        description="Shell completion for wideprint, e.g. "

@@ -43,14 +43,21 @@ def cups_missing() -> str | None:
     return None
 
 
+#: Debian's cups-filters packages' MIME files in DataDir/mime (cups-filters,
+#: cups-filters-core-drivers): left out of a cupsd that is to run without cups-filters
+FILTERS_MIME = ("cupsfilters", "braille")
+
+
 class Cupsd:
     """A cupsd of its own: `Listen 127.0.0.1:PORT`, its config, spool, cache and logs in
     `d`, ServerBin `d/bin` = the system's helpers plus the `backends` given (name -> file,
     and CUPS' `ipp`, installed 0700 root: cupsd runs such a backend as root); `conf`: files
-    copied into its ServerRoot (e.g. a .convs file)."""
+    copied into its ServerRoot (e.g. a .convs file).  `filters=False`: a CUPS without
+    cups-filters (cups-daemon alone): its DataDir is the system's less cups-filters' MIME
+    types and conversions, so cupsd knows none of its filters."""
 
     def __init__(self, d: Path, backends: dict[str, Path] | None = None,
-                 conf: tuple[Path, ...] = ()):
+                 conf: tuple[Path, ...] = (), filters: bool = True):
         self.dir = Path(d)
         os.chmod(self.dir, 0o755)
         self.port = free_port()
@@ -73,6 +80,18 @@ class Cupsd:
             os.chmod(d / "bin" / "backend" / name, 0o700)
         for f in conf:
             shutil.copy(f, d / "conf" / Path(f).name)
+        data = Path("/usr/share/cups")
+        if not filters:
+            data = d / "data"
+            data.mkdir()
+            for entry in Path("/usr/share/cups").iterdir():
+                if entry.name != "mime":
+                    os.symlink(entry, data / entry.name)
+            (data / "mime").mkdir()
+            for entry in (Path("/usr/share/cups") / "mime").iterdir():
+                if not entry.name.startswith(FILTERS_MIME):
+                    os.symlink(entry, data / "mime" / entry.name)
+            os.chmod(data, 0o755)
         (d / "conf" / "cups-files.conf").write_text(f"""\
 ServerRoot {d}/conf
 RequestRoot {d}/spool
@@ -80,7 +99,7 @@ TempDir {d}/tmp
 CacheDir {d}/cache
 StateDir {d}/state
 ServerBin {d}/bin
-DataDir /usr/share/cups
+DataDir {data}
 ErrorLog {d}/log/error_log
 AccessLog {d}/log/access_log
 PageLog {d}/log/page_log
@@ -128,6 +147,25 @@ PreserveJobFiles No
         self.proc.kill()
         pytest.fail("cupsd did not listen: " + self.log())
 
+    def mime_loads(self) -> int:
+        """How often cupsd has loaded its MIME types and conversions (at start, at reload)."""
+        p = self.dir / "log" / "error_log"
+        return p.read_text(errors="replace").count("Loaded MIME database") if p.exists() else 0
+
+    def wait_reload(self, before: int, timeout: float = 30) -> None:
+        """Until cupsd has loaded its MIME database again (after `before` loads) and listens."""
+        deadline = time.monotonic() + timeout
+        while self.mime_loads() <= before:
+            assert time.monotonic() < deadline, "cupsd did not reload" + self.log()
+            time.sleep(0.1)
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
+                return
+            except OSError:
+                assert time.monotonic() < deadline, "cupsd does not listen" + self.log()
+                time.sleep(0.1)
+
     def log(self) -> str:
         p = self.dir / "log" / "error_log"
         return "\n--- cupsd error_log ---\n" + (p.read_text()[-4000:] if p.exists() else "(none)")
@@ -150,24 +188,26 @@ PreserveJobFiles No
 
 
 def private_cupsd(tmp_path_factory, backends: dict[str, Path] | None = None,
-                  conf: tuple[Path, ...] = ()):
+                  conf: tuple[Path, ...] = (), filters: bool = True):
     """The body of a cupsd fixture: yields a running Cupsd, stops it after."""
     why = cups_missing()
     if why:
         pytest.fail(why)                    # a missing dependency fails loudly, never a skip
     if os.geteuid() != 0:
         pytest.skip("the private cupsd runs its backends as root; run as root")
-    cups = Cupsd(tmp_path_factory.mktemp("cups"), backends, conf)
+    cups = Cupsd(tmp_path_factory.mktemp("cups"), backends, conf, filters)
     yield cups
     cups.stop()
 
 
 class IppServe:
-    """`wideprint serve --ipp` as a subprocess (printers `name=emulator`), as an operator
-    starts it; `uris` are the printers' ipp:// URIs from server.json, `auth_uri` the same
-    with the token as password (docs/ipp.md, "Authentication")."""
+    """`wideprint serve --ipp` as a subprocess (printers `name=emulator`, or the device spec
+    `devices` names), as an operator starts it; `uris` are the printers' ipp:// URIs from
+    server.json, `auth_uri` the same with the token as password (docs/ipp.md,
+    "Authentication"), `url` the server's API (and web page)."""
 
-    def __init__(self, root: Path, printers: list[str], *args: str):
+    def __init__(self, root: Path, printers: list[str], *args: str,
+                 devices: dict[str, str] | None = None):
         from wideprint.app.server_cli import Client
         from wideprint.rip.profile import load_profile
         if not shutil.which("ipptool"):
@@ -179,7 +219,7 @@ class IppServe:
         cmd = [sys.executable, "-m", "wideprint.app.cli", "serve", "--state-dir",
                str(self.state), "--media-dir", str(self.media), "--port", "0"]
         for p in printers:
-            cmd += ["--printer", f"{p}=emulator"]
+            cmd += ["--printer", f"{p}={(devices or {}).get(p, 'emulator')}"]
         self.proc = subprocess.Popen(cmd + ["--ipp", "--ipp-port", str(self.port), *args],
                                      stdout=self._log, stderr=subprocess.STDOUT, env=env)
         deadline = time.monotonic() + 90
@@ -197,6 +237,7 @@ class IppServe:
             self.proc.wait()
             pytest.fail(f"serve --ipp did not start: {(root / 'serve.log').read_text()}")
         self.uris = info["ipp"]
+        self.url = info["url"]
         self.client = Client(self.state)
         self.token = (self.state / "token").read_text().strip()
         self.auth_uri = {name: uri.replace("ipp://", f"ipp://wp:{self.token}@")

@@ -9,6 +9,7 @@ both plotters, each job printed once."""
 
 import shutil
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -79,6 +80,29 @@ def cups(tmp_path_factory, shop):
         cupsd.run("cupsenable", "-h", cupsd.host, "shop")
         cupsd.run("cupsaccept", "-h", cupsd.host, "shop")
         yield cupsd
+
+
+@pytest.fixture(scope="module", params=["with cups-filters", "cups-daemon alone"])
+def installed_cups(request, tmp_path_factory, shop):
+    """A shop's CUPS server as Debian installs it — the `cups` package with cups-filters (a
+    desktop), or cups-daemon alone — running, where `wideprint cups install` put the
+    conversions and told cupsd to reload; then a driverless queue for plotter1."""
+    filters = request.param == "with cups-filters"
+    if filters and not conversions_from("application/pdf"):
+        pytest.fail("cups-filters is not installed: apt-get install cups-filters "
+                    "(resources/debian-packages.txt; .ci/run installs it)")
+    for cupsd in private_cupsd(tmp_path_factory, filters=filters):
+        before = cupsd.mime_loads()
+        r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "cups", "install",
+                            "--server-root", str(cupsd.dir / "conf"),
+                            "--cupsd-pid", str(cupsd.proc.pid)],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "wideprint.convs: installed" in r.stdout and "SIGHUP" in r.stdout, r.stdout
+        cupsd.wait_reload(before)
+        assert (cupsd.dir / "conf" / "wideprint.convs").read_bytes() == CONVS.read_bytes()
+        _queues(cupsd, shop, ["plotter1"])
+        yield request.param, cupsd
 
 
 def _jpeg(path, seed: int, dpi: int = 200):
@@ -177,6 +201,46 @@ def test_with_wideprint_convs_tiff_and_pdf_pass_through_unchanged(cups, shop, tm
     assert_bit_exact(serve, job, tif, "plotter2")
     job = wait_job(serve.client, "flyer.pdf", timeout=90)
     assert_bit_exact(serve, job, pdf, "plotter2")
+
+
+def test_cups_install_passes_tiff_and_pdf_unchanged_with_or_without_cups_filters(
+        installed_cups, shop, tmp_path):
+    """`wideprint cups install` on a running CUPS: `lp file.tif` and `lp file.pdf` (no -o
+    raw) reach the plotter as the client's files and print bit-exact — where cups-filters
+    would otherwise turn them into its own PDF, and where CUPS alone would refuse them."""
+    kind, cups = installed_cups
+    tag = "filters" if kind == "with cups-filters" else "plain"
+    serve = shop["plotter1"]
+    tif = write_cmyk_tiff(tmp_path / f"{tag}-map.tif", random_planes(80, 120, seed=61))
+    pdf = _pdf(tmp_path / f"{tag}-flyer.pdf")
+    lp(cups, "plotter1", tif)
+    lp(cups, "plotter1", pdf)
+    job = wait_job(serve.client, tif.name, timeout=90)
+    assert_bit_exact(serve, job, tif, "plotter1")
+    job = wait_job(serve.client, pdf.name, timeout=90)
+    assert_bit_exact(serve, job, pdf, "plotter1")
+
+
+def test_cups_install_status_and_uninstall(tmp_path):
+    """The command on a ServerRoot: installed once (a second time: already), status, removed;
+    no ServerRoot: exit 1, naming it."""
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "wideprint.app.cli", "cups", *args,
+                               "--server-root", str(tmp_path / "etc-cups")],
+                              capture_output=True, text=True, timeout=60)
+    r = cli("install", "--no-reload")
+    assert r.returncode == 1 and "etc-cups is not there" in r.stderr, r.stdout + r.stderr
+    (tmp_path / "etc-cups").mkdir()
+    assert cli("status").returncode == 1
+    r = cli("install", "--no-reload")
+    assert r.returncode == 0 and "installed" in r.stdout, r.stdout + r.stderr
+    dest = tmp_path / "etc-cups" / "wideprint.convs"
+    assert dest.read_bytes() == CONVS.read_bytes() and dest.stat().st_mode & 0o777 == 0o644
+    r = cli("install", "--no-reload")
+    assert r.returncode == 0 and "already installed" in r.stdout
+    assert cli("status").returncode == 0
+    r = cli("uninstall", "--no-reload")
+    assert r.returncode == 0 and "removed" in r.stdout and not dest.exists()
 
 
 def test_a_class_spreads_six_jobs_over_two_plotters_each_printed_once(cups, shop, tmp_path):

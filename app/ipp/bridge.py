@@ -59,6 +59,28 @@ def _field(text) -> str:
     return " ".join(str(text or "").split())
 
 
+def web_url(host: str | None, port: int | None) -> str:
+    """The shop's web page (docs/web.md) for printer-more-info: the server's API address;
+    a server listening on every address is reached on the host the IPP client used ("*")."""
+    if not host or host in ("0.0.0.0", "::", "*"):
+        host = "*"
+    elif ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/"
+
+
+def media_line(printer: dict, profile_width_mm: float) -> str:
+    """The paper loaded on a printer, for its IPP media attributes (docs/ipp.md "The paper"):
+    `media NAME WIDTH_MM LENGTH_MM`.  The width: the tracked roll's, else the printer's
+    last measurement (its edge sensors), else the profile's paper; the length: what is left
+    of the tracked roll, 0 when nobody knows it."""
+    roll = printer.get("roll") or {}
+    width = roll.get("width_mm") or printer.get("paper_mm") or profile_width_mm
+    left = roll.get("remaining_mm")
+    length = int(left) if isinstance(left, (int, float)) and left > 0 else 0
+    return "\t".join(["media", _field(printer["name"]), str(int(round(width))), str(length)])
+
+
 def job_name(ipp_name: str, fmt: str) -> str:
     """A plain file name for the queue (docs/server.md, "Safety rules") from an IPP job-name,
     with the format's suffix."""
@@ -158,6 +180,7 @@ class IppBridge:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._dpi: dict[str, tuple] = {}
+        self._paper: dict[str, float] = {}         # each printer's profile paper width
 
     def _client(self, user: str | None = None):
         from ..client import Client
@@ -170,14 +193,17 @@ class IppBridge:
         from ...rip.profile import load_profile
         from ...rip.settings import MAX_SIDE, SETTINGS
         default_dpi = next(s.default for s in SETTINGS if s.name == "dpi")
+        from ... import __version__
         lines = [f"listen {self.listen}", f"port {self.port}", f"spool {self.dir / 'spool'}",
                  f"log {self.dir / 'wideprint-ipp.log'}", f"loglevel {self.log_level}",
-                 f"auth {self.auth}", "name wideprint"]
+                 f"auth {self.auth}", "name wideprint", f"version {_field(__version__)}",
+                 f"web-url {web_url(client.host, client.port)}"]
         if self.auth == "token":
             lines.append(f"token {client.token}")
         for p in client.printers():
             prof = load_profile(p["profile"])
             self._dpi[p["name"]] = tuple(prof.dpi_modes)
+            self._paper[p["name"]] = float(prof.paper.default_width_mm)
             max_len = int(MAX_SIDE * prof.row_um / 1000 // 1000 * 1000)   # whole metres
             lines += [f"printer {p['name']}",
                       f"make-and-model {_field(prof.printer.name)}",
@@ -325,15 +351,17 @@ class IppBridge:
         """The server's printer and job states to the program, when they change."""
         from ..client import ApiError
         client = self._client()
-        sent_printers: dict[str, str] = {}
+        sent_printers: dict[tuple, str] = {}
         sent_jobs: dict[int, str] = {}
         while not self._stop.wait(POLL_S):
             try:
                 for p in client.printers():
-                    line = printer_line(p)
-                    if sent_printers.get(p["name"]) != line:
-                        self._send(line)
-                        sent_printers[p["name"]] = line
+                    for line in (printer_line(p),
+                                 media_line(p, self._paper.get(p["name"], 0.0))):
+                        key = (p["name"], line.split("\t", 1)[0])
+                        if sent_printers.get(key) != line:
+                            self._send(line)
+                            sent_printers[key] = line
                 with self._tracks_lock:
                     tracks = dict(self._tracks)
                 for tag, job_id in tracks.items():

@@ -45,15 +45,16 @@ typedef struct wp_printer_s		// One printer of the wideprint server
 {
   char		name[64];		// its name on the server (the IPP printer's name too)
   char		make_model[128];	// printer-make-and-model
-  int		roll_mm,		// the paper width (printer profile: [paper])
+  int		roll_mm,		// the paper width: measured by the printer, else the profile's
+		roll_len_mm,		// the roll's remaining length as the server tracks it (0: unknown)
 		print_mm,		// the widest printable span ([printer] print_width_mm)
 		margin_hmm,		// side margins, hundredths of mm
 		max_length_mm,		// the longest print (the RIP's limit)
 		num_dpi,		// dpi modes ([encoder] dpi_modes)
 		dpi[WP_MAX_DPI],
 		default_dpi;
-  char		media_names[16][64];	// storage for the driver's media names
-  int		num_media;
+  char		media_names[2][16][64];	// storage for the driver's media names: two banks,
+  int		bank, num_media;	// the one in use and the one rewritten on a change
   pappl_printer_t *printer;		// the PAPPL printer
   // state from the server (bridge "printer" lines)
   char		state[32];		// idle, printing, offline, fault
@@ -89,7 +90,9 @@ static struct
 		log[1024],		// log file ("-": stderr)
 		auth[16],		// "token" or "none"
 		token[256],		// the API token (the password of Basic authentication)
-		name[128];		// the system's name
+		name[128],		// the system's name
+		version[64],		// wideprint's version (printer-firmware-string-version)
+		web_url[512];		// the shop's web page (printer-more-info leads there)
   int		port;
   pappl_loglevel_t loglevel;
   int		num_printers;
@@ -223,6 +226,10 @@ load_config(const char *path)
       papplCopyString(wp.token, value, sizeof(wp.token));
     else if (!strcmp(key, "name"))
       papplCopyString(wp.name, value, sizeof(wp.name));
+    else if (!strcmp(key, "version"))
+      papplCopyString(wp.version, value, sizeof(wp.version));
+    else if (!strcmp(key, "web-url"))
+      papplCopyString(wp.web_url, value, sizeof(wp.web_url));
     else if (p && !strcmp(key, "make-and-model"))
       papplCopyString(p->make_model, value, sizeof(p->make_model));
     else if (p && !strcmp(key, "roll-width-mm"))
@@ -732,10 +739,35 @@ reason_bits(const char *reasons)
 
 
 static ipp_t *
-extra_attrs(void)			// what PAPPL 1.3 does not make from the driver data
+extra_attrs(wp_printer_t *p)		// what PAPPL 1.3 does not make from the driver data
 {
   ipp_t *attrs = ippNew();
   static const char * const intents[] = { "auto", "absolute", "perceptual", "relative", "saturation" };
+
+  if (p && p->roll_len_mm <= 0)
+  {
+    // the loaded roll whose length nobody measured (docs/ipp.md "The paper"): PAPPL can only
+    // say a ready medium by a PWG name, which states a length; so media-col-ready is ours -
+    // the measured width, any length from 25 mm up to the longest print (a range, as for a
+    // custom size), "length unknown" in words - and there is no media-ready keyword
+    ipp_t *col = ippNew(), *size = ippNew();
+    char info[128];
+
+    ippAddInteger(size, IPP_TAG_ZERO, IPP_TAG_INTEGER, "x-dimension", p->roll_mm * 100);
+    ippAddRange(size, IPP_TAG_ZERO, "y-dimension", 2500, p->max_length_mm * 100);
+    ippAddInteger(col, IPP_TAG_ZERO, IPP_TAG_INTEGER, "media-bottom-margin", 0);
+    snprintf(info, sizeof(info), "roll %d mm wide, length unknown", p->roll_mm);
+    ippAddString(col, IPP_TAG_ZERO, IPP_TAG_TEXT, "media-info", NULL, info);
+    ippAddInteger(col, IPP_TAG_ZERO, IPP_TAG_INTEGER, "media-left-margin", p->margin_hmm);
+    ippAddInteger(col, IPP_TAG_ZERO, IPP_TAG_INTEGER, "media-right-margin", p->margin_hmm);
+    ippAddCollection(col, IPP_TAG_ZERO, "media-size", size);
+    ippAddString(col, IPP_TAG_ZERO, IPP_CONST_TAG(IPP_TAG_KEYWORD), "media-source", NULL, "main-roll");
+    ippAddInteger(col, IPP_TAG_ZERO, IPP_TAG_INTEGER, "media-top-margin", 0);
+    ippAddString(col, IPP_TAG_ZERO, IPP_CONST_TAG(IPP_TAG_KEYWORD), "media-type", NULL, "stationery");
+    ippAddCollection(attrs, IPP_TAG_PRINTER, "media-col-ready", col);
+    ippDelete(size);
+    ippDelete(col);
+  }
 
   // print-rendering-intent: the RIP's ICC rendering intent (a vendor attribute to PAPPL)
   ippAddStrings(attrs, IPP_TAG_PRINTER, IPP_CONST_TAG(IPP_TAG_KEYWORD), "print-rendering-intent-supported", 5, NULL, intents);
@@ -747,11 +779,13 @@ extra_attrs(void)			// what PAPPL 1.3 does not make from the driver data
 }
 
 
+static void fill_media(wp_printer_t *p, pappl_pr_driver_data_t *d);
+
 static void
-set_alert(wp_printer_t *p)		// printer-alert(-description): the state in plain words
+publish(wp_printer_t *p)		// the paper and the state in words, to PAPPL
 {
   pappl_pr_driver_data_t	data;
-  ipp_t				*attrs = extra_attrs();
+  ipp_t				*attrs = extra_attrs(p);
 
   if (p->message[0])
   {
@@ -762,8 +796,29 @@ set_alert(wp_printer_t *p)		// printer-alert(-description): the state in plain w
     ippAddString(attrs, IPP_TAG_PRINTER, IPP_TAG_TEXT, "printer-alert-description", NULL, p->message);
   }
   papplPrinterGetDriverData(p->printer, &data);
+  fill_media(p, &data);
   papplPrinterSetDriverData(p->printer, &data, attrs);
   ippDelete(attrs);
+}
+
+
+static void
+media_update(char **f, int n)		// media NAME WIDTH_MM LENGTH_MM (0: unknown)
+{
+  wp_printer_t	*p;
+  int		width, length;
+
+  if (n < 4 || (p = find_printer(f[1])) == NULL || !p->printer)
+    return;
+  width  = atoi(f[2]);
+  length = atoi(f[3]);
+  if (width < 25 || width > p->print_mm || length < 0)
+    return;				// not a paper this printer can hold: keep what was said
+  if (width == p->roll_mm && length == p->roll_len_mm)
+    return;
+  p->roll_mm     = width;
+  p->roll_len_mm = length;
+  publish(p);
 }
 
 
@@ -791,7 +846,7 @@ printer_update(char **f, int n)		// printer NAME STATE PAUSED REASONS MESSAGE
   if (message_changed)
   {
     papplCopyString(p->message, f[5], sizeof(p->message));
-    set_alert(p);
+    publish(p);
   }
 }
 
@@ -840,6 +895,8 @@ reader_thread(void *data)		// lines from the bridge; EOF: the bridge is gone, st
     n = split_tabs(line, f, 16);
     if (!strcmp(f[0], "printer"))
       printer_update(f, n);
+    else if (!strcmp(f[0], "media"))
+      media_update(f, n);
     else if (!strcmp(f[0], "job"))
       job_update(f, n);
     else if (!strcmp(f[0], "quit"))
@@ -924,19 +981,28 @@ add_media(wp_printer_t *p, pappl_pr_driver_data_t *d, const char *name)
 {
   if (p->num_media < 16 && d->num_media < PAPPL_MAX_MEDIA)
   {
-    papplCopyString(p->media_names[p->num_media], name, sizeof(p->media_names[0]));
-    d->media[d->num_media ++] = p->media_names[p->num_media ++];
+    papplCopyString(p->media_names[p->bank][p->num_media], name, sizeof(p->media_names[0][0]));
+    d->media[d->num_media ++] = p->media_names[p->bank][p->num_media ++];
   }
 }
 
 
-static bool
-driver_cb(pappl_system_t *system, const char *driver_name, const char *device_uri,
-          const char *device_id, pappl_pr_driver_data_t *d, ipp_t **driver_attrs, void *cbdata)
+//
+// 'fill_media()' - The media a printer offers, from the paper loaded (docs/ipp.md "The paper").
+//
+// The paper's width is the printer's measurement (its edge sensors, via the server), else
+// the profile's paper until the first measurement; its length is the remaining length of
+// the roll the server tracks, or unknown.  Offered: the standard sizes the paper is wide
+// enough for, and any size from 25 x 25 mm up to the paper's width by the longest print
+// (or the roll left).  The default is the roll itself - never a sheet size: CUPS fits jobs
+// to the default - and the ready medium is the roll (extra_attrs() when its length is unknown).
+//
+
+static void
+fill_media(wp_printer_t *p, pappl_pr_driver_data_t *d)
 {
-  wp_printer_t	*p;
-  char		name[64];
-  int		i;
+  char	name[64];
+  int	i, length = p->roll_len_mm > 0 && p->roll_len_mm < p->max_length_mm ? p->roll_len_mm : p->max_length_mm;
   static const struct { const char *name; int w, l; } sizes[] =
   {					// standard sizes offered when the roll is wide enough
     { "na_index-4x6_4x6in", 102, 152 },
@@ -950,6 +1016,46 @@ driver_cb(pappl_system_t *system, const char *driver_name, const char *device_ur
     { "iso_a0_841x1189mm", 841, 1189 },
     { "iso_2a0_1189x1682mm", 1189, 1682 }
   };
+
+  p->bank      = !p->bank;		// PAPPL may be reading the other bank right now
+  p->num_media = 0;
+  d->num_media = 0;
+  for (i = 0; i < (int)(sizeof(sizes) / sizeof(sizes[0])); i ++)
+    if (sizes[i].w <= p->roll_mm && sizes[i].l <= length)
+      add_media(p, d, sizes[i].name);
+  snprintf(name, sizeof(name), "roll_max_%dx%dmm", p->roll_mm, length);
+  add_media(p, d, name);
+  snprintf(name, sizeof(name), "roll_min_%dx%dmm", 25, 25);
+  add_media(p, d, name);
+
+  d->num_source = 1;
+  d->source[0]  = "main-roll";
+  memset(&d->media_ready[0], 0, sizeof(d->media_ready[0]));
+  if (p->roll_len_mm > 0)		// a tracked roll: its width and what is left of it
+    snprintf(d->media_ready[0].size_name, sizeof(d->media_ready[0].size_name), "roll_main-roll_%dx%dmm", p->roll_mm, p->roll_len_mm);
+  d->media_ready[0].size_width   = p->roll_mm * 100;
+  d->media_ready[0].size_length  = p->roll_len_mm * 100;
+  d->media_ready[0].left_margin  = d->media_ready[0].right_margin = p->margin_hmm;
+  papplCopyString(d->media_ready[0].source, "main-roll", sizeof(d->media_ready[0].source));
+  papplCopyString(d->media_ready[0].type, "stationery", sizeof(d->media_ready[0].type));
+
+  // the default: the roll, as wide as the paper, as long as a print may be
+  memset(&d->media_default, 0, sizeof(d->media_default));
+  snprintf(d->media_default.size_name, sizeof(d->media_default.size_name), "roll_main-roll_%dx%dmm", p->roll_mm, length);
+  d->media_default.size_width  = p->roll_mm * 100;
+  d->media_default.size_length = length * 100;
+  d->media_default.left_margin = d->media_default.right_margin = p->margin_hmm;
+  papplCopyString(d->media_default.source, "main-roll", sizeof(d->media_default.source));
+  papplCopyString(d->media_default.type, "stationery", sizeof(d->media_default.type));
+}
+
+
+static bool
+driver_cb(pappl_system_t *system, const char *driver_name, const char *device_uri,
+          const char *device_id, pappl_pr_driver_data_t *d, ipp_t **driver_attrs, void *cbdata)
+{
+  wp_printer_t	*p;
+  int		i;
 
   (void)system;
   (void)driver_name;
@@ -998,41 +1104,7 @@ driver_cb(pappl_system_t *system, const char *driver_name, const char *device_ur
   d->left_right = p->margin_hmm;
   d->bottom_top = 0;
 
-  // media: the roll (any width up to the print width, any length up to the longest print)
-  // and the standard sizes the roll is wide enough for
-  d->num_media = 0;
-  for (i = 0; i < (int)(sizeof(sizes) / sizeof(sizes[0])); i ++)
-    if (sizes[i].w <= p->roll_mm)
-      add_media(p, d, sizes[i].name);
-  snprintf(name, sizeof(name), "roll_max_%dx%dmm", p->print_mm, p->max_length_mm);
-  add_media(p, d, name);
-  snprintf(name, sizeof(name), "roll_min_%dx%dmm", 25, 25);
-  add_media(p, d, name);
-
-  d->num_source = 1;
-  d->source[0]  = "main-roll";
-  memset(&d->media_ready[0], 0, sizeof(d->media_ready[0]));
-  snprintf(d->media_ready[0].size_name, sizeof(d->media_ready[0].size_name), "roll_main-roll_%dx%dmm", p->roll_mm, p->max_length_mm);
-  d->media_ready[0].size_width   = p->roll_mm * 100;
-  d->media_ready[0].size_length  = p->max_length_mm * 100;
-  d->media_ready[0].left_margin  = d->media_ready[0].right_margin = p->margin_hmm;
-  papplCopyString(d->media_ready[0].source, "main-roll", sizeof(d->media_ready[0].source));
-  papplCopyString(d->media_ready[0].type, "stationery", sizeof(d->media_ready[0].type));
-
-  memset(&d->media_default, 0, sizeof(d->media_default));
-  if (p->roll_mm >= 210)
-  {
-    papplCopyString(d->media_default.size_name, "iso_a4_210x297mm", sizeof(d->media_default.size_name));
-    d->media_default.size_width  = 21000;
-    d->media_default.size_length = 29700;
-  }
-  else
-  {
-    d->media_default = d->media_ready[0];
-  }
-  d->media_default.left_margin = d->media_default.right_margin = p->margin_hmm;
-  papplCopyString(d->media_default.source, "main-roll", sizeof(d->media_default.source));
-  papplCopyString(d->media_default.type, "stationery", sizeof(d->media_default.type));
+  fill_media(p, d);
 
   d->num_type = 1;
   d->type[0]  = "stationery";
@@ -1044,8 +1116,34 @@ driver_cb(pappl_system_t *system, const char *driver_name, const char *device_ur
 
   d->num_vendor = 1;
   d->vendor[0]  = "print-rendering-intent";
-  *driver_attrs = extra_attrs();
+  *driver_attrs = extra_attrs(p);
   return (true);
+}
+
+
+// -- the links IPP clients show: the shop's web page -----------------------------------------
+
+//
+// 'web_page_cb()' - Send a browser to the print server's web page (docs/web.md).
+//
+// PAPPL's own web interface is off (the server's page is the one place a shop looks at its
+// printers), but printer-more-info and printer-supply-info-uri still name PAPPL's pages
+// "/NAME/" and "/NAME/supplies": those answer with a redirect to the server's page.  A
+// "*" as the page's host (a server listening on every address) is the host the client used.
+//
+
+static bool
+web_page_cb(pappl_client_t *client, void *data)
+{
+  char		url[1024];
+  const char	*star = strstr(wp.web_url, "//*");
+
+  (void)data;
+  if (star)
+    snprintf(url, sizeof(url), "%.*s//%s%s", (int)(star - wp.web_url), wp.web_url, papplClientGetHostName(client), star + 3);
+  else
+    papplCopyString(url, wp.web_url, sizeof(url));
+  return (papplClientRespondRedirect(client, HTTP_STATUS_FOUND, url));
 }
 
 
@@ -1099,6 +1197,17 @@ main(int argc, char *argv[])
   }
   if (!strcmp(wp.auth, "token"))
     papplSystemSetAuthCallback(wp_system, "Basic", auth_cb, NULL);
+  if (wp.version[0])
+  {
+    // printer-firmware-name/-string-version/-version: the wideprint that answers
+    pappl_version_t version;
+
+    memset(&version, 0, sizeof(version));
+    papplCopyString(version.name, "wideprint", sizeof(version.name));
+    papplCopyString(version.sversion, wp.version, sizeof(version.sversion));
+    sscanf(wp.version, "%hu.%hu.%hu", version.version + 0, version.version + 1, version.version + 2);
+    papplSystemSetVersions(wp_system, 1, &version);
+  }
 
   papplDeviceAddScheme("wideprint", PAPPL_DEVTYPE_CUSTOM_LOCAL, NULL, dev_open, dev_close, dev_read, dev_write, dev_status, NULL);
   papplSystemSetPrinterDrivers(wp_system, 1, &driver, NULL, NULL, driver_cb, NULL);
@@ -1150,6 +1259,15 @@ main(int argc, char *argv[])
     papplPrinterSetMaxActiveJobs(p->printer, 0);
     papplPrinterSetMaxCompletedJobs(p->printer, 100);
     papplPrinterGetPath(p->printer, NULL, path, sizeof(path));
+    if (wp.web_url[0])
+    {
+      char web[300];
+
+      snprintf(web, sizeof(web), "%s/", path);		// printer-more-info
+      papplSystemAddResourceCallback(wp_system, web, "text/html", web_page_cb, NULL);
+      snprintf(web, sizeof(web), "%s/supplies", path);	// printer-supply-info-uri
+      papplSystemAddResourceCallback(wp_system, web, "text/html", web_page_cb, NULL);
+    }
     papplSystemGetHostName(wp_system, host, sizeof(host));
     // the web path is "/NAME"; the IPP resource is "/ipp/print/NAME"
     snprintf(uri, sizeof(uri), "ipp://%s:%d/ipp/print%s", host, papplSystemGetHostPort(wp_system), path);

@@ -161,6 +161,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_the_printer_application_is_not_built_or_pappl_missing_is_loud",  # 6.1
         "test_jpeg_prints_bit_exact_with_the_original_file",  # 1.2
         "test_printing_needs_the_token",  # 5.3
+        "test_the_media_attributes_follow_the_paper_the_printer_measured",  # 16.5 (its own server)
     },
     "test_layers.py": {
         "test_device_sim_sees_only_the_seam_and_itself",  # 0.7
