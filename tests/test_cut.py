@@ -101,7 +101,8 @@ def true_path_mm(scale: float, x0_mm: float, y0_mm: float) -> np.ndarray:
 def decal(tmp_path_factory):
     d = tmp_path_factory.mktemp("cut")
     pdf = d / "decal.pdf"
-    make_pdf(pdf, 200, H_PT, f"/CS0 CS 1 SCN 0.3 w {cut_ops()} S 0 0 0 1 k 50 50 60 40 re f\n"
+    # a 2 pt cut stroke whose alternate is magenta, as designers' files have it
+    make_pdf(pdf, 200, H_PT, f"/CS0 CS 1 SCN 2 w {cut_ops()} S 0 0 0 1 k 50 50 60 40 re f\n"
              "q 1 0 0 1 150 150 cm /Fm0 Do Q\n")
     runs = {}
     for ext in ("plt", "dxf"):
@@ -177,6 +178,25 @@ def test_registration_marks_are_k_only_where_the_cut_file_says(decal):
     assert not cmy.any()
 
 
+def test_no_ink_under_the_cut_path_on_the_media(decal):
+    """The cut line is never printed, whatever its stroke width (the render leaves cut
+    colours out, docs/spot.md): no drop within 1 mm of the cut path, no magenta anywhere
+    (the cut colour's alternate), and the K shape inside it printed."""
+    d, _ = decal
+    media = api.read_planes(d / "media-plt.tif")
+    lines, _ = read_hpgl(str(d / "decal.plt"))
+    col, row = 25.4 / 150, ROW_UM / 1000
+    ink = media.any(axis=2)
+    ys, xs = np.nonzero(ink)
+    near = np.zeros(len(xs), bool)
+    centres = np.stack([(xs + 0.5) * col, (ys + 0.5) * row], axis=1)
+    for line in lines:
+        near |= seg_dist(centres, cutter.resample(line, 0.2)) < 1.0
+    assert not near.any(), f"{near.sum()} dots within 1 mm of the cut path"
+    assert not media[..., 1].any()
+    assert media[..., 3].sum() > 1000
+
+
 W_MM, L_MM = 40.0, 3000.0
 
 
@@ -205,8 +225,8 @@ def test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour(tmp_path)
     # the cut line's alternate is no ink, so the scan shows only the K contour line
     make_pdf(pdf, W_MM / PT, L_MM / PT, f"/CS0 CS 1 SCN 0.3 w {c} S\n0 0 0 1 K {0.4 / PT:.4f} w {c} S\n",
              cut_alt=(0, 0, 0, 0))
-    run = wideprint("print", str(pdf), "--dpi", "300", "--cut-out", str(tmp_path / "cut.plt"),
-                    "--scan-out", str(tmp_path / "scan.tif"), "--scan-dpi", "300",
+    run = wideprint("print", str(pdf), "--dpi", "150", "--cut-out", str(tmp_path / "cut.plt"),
+                    "--scan-out", str(tmp_path / "scan.tif"), "--scan-dpi", "200",
                     "--inject", "feed-error=0.3%", "--inject", "skew=0.2deg")
     assert run.returncode == 0, run.stderr
     lines, marks = read_hpgl(str(tmp_path / "cut.plt"))
@@ -236,9 +256,8 @@ def test_print_server_keeps_the_cut_files_with_the_job(decal, print_server):
     c = Client(srv.state_dir)
     try:
         job = c.submit(d / "decal.pdf", settings={"dpi": 150, "placement": {"scale": 1.5, "marks": "cut"}})["job"]
-        plain = c.submit(d / "decal.pdf", settings={"dpi": 150})["job"]
+        plain = c.submit(d / "decal.pdf", settings={"dpi": 150}, hold=True)["job"]
         assert c.wait(job["id"], timeout=120)["state"] == "done"
-        assert c.wait(plain["id"], timeout=120)["state"] == "done"
         for ext, read in (("plt", read_hpgl), ("dxf", read_dxf)):
             got = d / f"server.{ext}"
             got.write_bytes(c.cut_file(job["id"], ext))
@@ -253,3 +272,119 @@ def test_print_server_keeps_the_cut_files_with_the_job(decal, print_server):
         assert err.value.status == 404 and "not a print-and-cut job" in str(err.value)
     finally:
         c.close()
+
+
+# -- the extraction's graphics state, documents and layouts (no printing: Ghostscript renders) --
+def settings_for(dpi=300, **placement):
+    from wideprint.rip.settings import Placement, RipSettings
+    return RipSettings(dpi=dpi, placement=Placement(**placement))
+
+
+def printed_box_mm(path: Path, st) -> tuple[float, float, float, float]:
+    """The K ink's bounding box as Ghostscript renders the document for the job, mm."""
+    from wideprint.rip.document import open_document
+    from wideprint.rip.inputs import sniff_input
+    with open_document(str(path), sniff_input(str(path)), st, load_profile()) as doc:
+        k = np.concatenate(list(doc.bands(256)))[..., 3] > 127
+    ys, xs = np.nonzero(k)
+    col, row = 25.4 / st.dpi, ROW_UM / 1000
+    return xs.min() * col, ys.min() * row, (xs.max() + 1) * col, (ys.max() + 1) * row
+
+
+def cut_box_mm(path: Path, st) -> tuple[float, float, float, float]:
+    from wideprint.rip.cut import cut_job
+    job = cut_job(str(path), st, load_profile())
+    pts = np.vstack([p.points for p in job.paths])
+    return pts[:, 0].min(), pts[:, 1].min(), pts[:, 0].max(), pts[:, 1].max()
+
+
+def test_devicen_tints_and_painting_operators(tmp_path):
+    """A DeviceN with a cut component cuts only where that component's tint is above 0;
+    `B` in the cut colour is one path; `n` paints nothing; a device colour after the spot
+    ends it; q/Q restores the colour."""
+    from wideprint.rip.cut import extract_pdf
+    pdf = pikepdf.new()
+    fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0], C1=[0, 1, 0, 0], N=1)
+    fn4 = pdf.make_stream(b"{pop pop 0 0 0 0}", FunctionType=4, Domain=[0, 1, 0, 1], Range=[0, 1] * 4)
+    res = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(
+        CS0=pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/Thru-cut"), pikepdf.Name.DeviceCMYK, fn]),
+        DN=pikepdf.Array([pikepdf.Name.DeviceN, pikepdf.Array([pikepdf.Name("/Spot1"), pikepdf.Name("/CutContour")]),
+                          pikepdf.Name.DeviceCMYK, fn4])))
+    content = ("/DN CS 1 0 SCN 0 0 m 10 0 l S "          # CutContour tint 0: not a cut
+               "0.5 1 SCN 0 10 m 10 10 l S "             # tint 1: a cut
+               "0 G q /CS0 cs 1 scn 0 20 m 10 20 l 10 30 l B Q "   # fill in the cut colour
+               "0 30 m 10 30 l f "                       # fill restored by Q: not a cut
+               "/CS0 CS 0 40 m 10 40 l n "               # n paints nothing
+               "0 0 0 1 K 0 50 m 10 50 l S "             # a device colour: not a cut
+               "/CS0 CS 0 SCN 0 60 m 10 60 l S")         # tint 0: not a cut
+    page = pikepdf.Dictionary(Type=pikepdf.Name.Page, MediaBox=[0, 0, 100, 100], Resources=res,
+                              Contents=pdf.make_stream(content.encode()))
+    pdf.pages.append(pikepdf.Page(page))
+    pdf.save(tmp_path / "dn.pdf")
+    raws = extract_pdf(str(tmp_path / "dn.pdf"), 1)
+    got = [(r.name, float(r.subpaths[0][0][1])) for r in raws]
+    assert got == [("CutContour", 10.0), ("Thru-cut", 20.0)], got
+
+
+@pytest.mark.parametrize("placement", [dict(rotate=90), dict(rotate=180, mirror=True, width_mm=123.4),
+                                       dict(rotate=270, scale=1.7)])
+def test_cut_path_lies_on_the_print_through_the_placement(tmp_path, placement):
+    """A CutContour rectangle over a K rectangle of the same size: through every
+    placement, the cut rectangle is where Ghostscript put the K one, within a dot."""
+    pdf = tmp_path / "rect.pdf"
+    make_pdf(pdf, 200, 150, "/CS0 CS 1 SCN 0.5 w 30 20 100 60 re S 0 0 0 1 k 30 20 100 60 re f\n")
+    st = settings_for(dpi=150, **placement)
+    got, want = cut_box_mm(pdf, st), printed_box_mm(pdf, st)
+    assert np.abs(np.subtract(got, want)).max() <= 25.4 / 150 + 0.07, (got, want)   # a column or a row
+
+
+def test_rotated_page_and_eps_go_through_ghostscript_as_printed(tmp_path):
+    """/Rotate 90 and a page box (CropBox) as Ghostscript applies them; an EPS through
+    pdfwrite with its BoundingBox as the page."""
+    pdf = pikepdf.new()
+    fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0], C1=[0, 1, 0, 0], N=1)
+    res = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(
+        CS0=pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/CutContour"), pikepdf.Name.DeviceCMYK, fn])))
+    page = pikepdf.Dictionary(Type=pikepdf.Name.Page, MediaBox=[0, 0, 300, 200], CropBox=[20, 10, 260, 190],
+                              Rotate=90, Resources=res, Contents=pdf.make_stream(
+                                  b"/CS0 CS 1 SCN 0.5 w 60 40 120 50 re S 0 0 0 1 k 60 40 120 50 re f"))
+    pdf.pages.append(pikepdf.Page(page))
+    pdf.save(tmp_path / "rot.pdf")
+    st = settings_for()
+    got, want = cut_box_mm(tmp_path / "rot.pdf", st), printed_box_mm(tmp_path / "rot.pdf", st)
+    assert np.abs(np.subtract(got, want)).max() <= 0.1, (got, want)
+    eps = tmp_path / "shape.eps"
+    eps.write_text("%!PS-Adobe-3.0 EPSF-3.0\n%%BoundingBox: 10 20 210 170\n"
+                   "[/Separation /CutContour /DeviceCMYK {pop 0 1 0 0}] setcolorspace 1 setcolor\n"
+                   "0.5 setlinewidth 40 50 moveto 150 50 lineto 150 130 170 150 40 130 curveto closepath stroke\n"
+                   "/DeviceCMYK setcolorspace 0 0 0 1 setcolor\n"
+                   "40 50 moveto 150 50 lineto 150 130 170 150 40 130 curveto closepath fill\nshowpage\n")
+    got, want = cut_box_mm(eps, st), printed_box_mm(eps, st)
+    assert np.abs(np.subtract(got, want)).max() <= 0.1, (got, want)
+
+
+def test_layouts_carry_their_items_cut_paths_and_marks(tmp_path):
+    """Step-and-repeat: every copy has its path and its marks, at its slot; tiles cut only
+    what lies on them."""
+    from wideprint.rip.cut import cut_job
+    from wideprint.rip.layout import plan_layout
+    pdf = tmp_path / "label.pdf"
+    make_pdf(pdf, 100, 80, "/CS0 CS 1 SCN 0.5 w 10 10 80 60 re S\n")
+    prof = load_profile()
+    alone = cut_job(str(pdf), settings_for(marks="cut"), prof,
+                    plan=plan_layout([str(pdf)], settings_for(marks="cut"), prof))
+    st = settings_for(marks="cut", repeat_across=3, repeat_along=2, gap_mm=4)
+    plan = plan_layout([str(pdf)], st, prof)
+    job = cut_job([str(pdf)], st, prof, plan=plan)
+    assert len(job.paths) == 6 and len(job.marks) == 6 * len(alone.marks)
+    g = plan.grid
+    for s, p in zip(plan.slots, job.paths):
+        shift = np.array([g.mm_x(s.x - plan.slots[0].x), g.mm_y(s.y - plan.slots[0].y)])
+        assert np.abs(p.points - (alone.paths[0].points + shift)).max() < 1e-9
+    tiles = settings_for(tile_width_mm=20)
+    tplan = plan_layout([str(pdf)], tiles, prof)
+    tjob = cut_job([str(pdf)], tiles, prof, plan=tplan)
+    assert len(tplan.slots) == 2 and len(tjob.paths) >= 2
+    for p in tjob.paths:                    # each piece lies within its tile's slot
+        assert any(g.mm_x(s.x) - 1e-6 <= p.points[:, 0].min() and p.points[:, 0].max()
+                   <= g.mm_x(s.x + s.item.width) + 1e-6 for s in tplan.slots)

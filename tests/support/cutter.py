@@ -42,7 +42,9 @@ def find_marks(dark: np.ndarray, pix_mm: float, marks: list, mark_mm: float) -> 
     each found by its size and fill, its centre the darkness-weighted centroid.  The found
     squares are matched to the file's by order: rows of pairs down the sheet, left then
     right (the cutter's own search pattern).  AssertionError when the count differs."""
-    binary = (dark > 0.5).astype(np.uint8)
+    # a little blur first: a mark printed at 150 dpi is a grid of dots with paper between
+    smooth = cv2.GaussianBlur(dark, (0, 0), max(0.1 / pix_mm, 0.5))
+    binary = (smooth > 0.4).astype(np.uint8)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
     side = mark_mm / pix_mm
     found = []

@@ -170,10 +170,14 @@ SLOW: dict[str, set[str] | str] = {
         "test_rip_imports_no_driver_no_emulator_no_app",  # 1.0
     },
     "test_cut.py": {
-        "test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour",  # 60
+        "test_camera_cutter_finds_the_marks_and_cuts_on_the_printed_contour",  # 17
         "test_cut_file_path_equals_the_pdf_path_on_the_sheet",  # 20 (the decal fixture: two prints)
         "test_registration_marks_are_k_only_where_the_cut_file_says",  # 0.1 (or the fixture)
-        "test_print_server_keeps_the_cut_files_with_the_job",  # 36
+        "test_print_server_keeps_the_cut_files_with_the_job",  # 8
+        "test_no_ink_under_the_cut_path_on_the_media",  # 0.1 (or the decal fixture)
+        "test_cut_path_lies_on_the_print_through_the_placement",  # 2.2
+        "test_rotated_page_and_eps_go_through_ghostscript_as_printed",  # 22 (loaded machine)
+        "test_layouts_carry_their_items_cut_paths_and_marks",  # 4.9
     },
     "test_layout.py": {
         "test_cli_nests_different_images_in_one_job_and_reports_the_media_saved",  # 1.0
