@@ -206,6 +206,7 @@ def open_document(path: str, fmt: str, settings, profile) -> DocumentSource:
         gap = int(round(float(pl.page_gap_mm) * 1000.0 / row_um)) if len(placed) > 1 else 0
         doc = DocumentSource(path, fmt, placed, gap, dpi, row_um, warnings, len(all_pages))
         doc.spots, doc.spot_plan = plan.spots, plan
+        doc.warnings += plan.warnings
     except BaseException:
         for _, s in placed:
             s.close()

@@ -158,9 +158,12 @@ def parse_cxf3(data: bytes, where: str = "CxF3", warnings: list | None = None) -
             if warnings is not None:
                 warnings.append(f"{where}: {name!r} has no ColorCIELab (spectral or RGB only): skipped")
             continue
-        lab_el = labs[0]
+        def d50(el) -> bool:
+            ill, obs = specs.get(el.get("ColorSpecification", ""), ("D50", "2_Degree"))
+            return ill.upper() == "D50" and obs.startswith("2")
+        lab_el = next((el for el in labs if d50(el)), labs[0])     # an object may give several
         ill, obs = specs.get(lab_el.get("ColorSpecification", ""), ("D50", "2_Degree"))
-        if ill.upper() != "D50" or not obs.startswith("2"):
+        if not d50(lab_el):
             raise ValueError(f"{where}: {name!r}: Lab in {ill}, {obs}: wideprint's libraries are "
                              f"D50, 2 degree (convert it, or export it so from the source)")
         vals = []

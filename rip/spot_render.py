@@ -31,6 +31,7 @@ class SpotPlan:
     fmt: str
     spots: list[dict] = field(default_factory=list)
     folder: str | None = None          # the private copy's folder, removed by close()
+    warnings: list[str] = field(default_factory=list)
 
     def close(self) -> None:
         if self.folder:
@@ -79,9 +80,9 @@ def prepare(path: str, fmt: str, settings, names: dict[str, str] | None = None,
     if fmt == "pdf":
         try:
             names = spot_names(path).names
-        except Exception as e:      # pikepdf refused a file Ghostscript may still read
-            return SpotPlan(path, fmt, [{"name": "?", "resolved": "alternate",
-                                         "message": f"spot colours not read: {e}"}])
+        except Exception as e:      # noqa: BLE001 - QPDF refused a file Ghostscript may still read
+            return SpotPlan(path, fmt, warnings=[f"spot colours not read (QPDF: {str(e)[:160]}): "
+                                                 f"they print through their alternate space"])
     names = {n: k for n, k in (names or {}).items()       # a DeviceN's process inks are no spots
              if not (k == "devicen" and n.casefold() in PROCESS)}
     if not names:

@@ -94,6 +94,16 @@ def test_cxf3_round_trip_the_xrite_structure_and_d50_only():
     d65 = XRITE_CXF.replace(b">D50<", b">D65<")
     with pytest.raises(ValueError, match="D65"):
         spot.parse_cxf3(d65)
+    # an object with a D65 and a D50 Lab: the D50 one is taken
+    both = XRITE_CXF.replace(
+        b'<cc:ColorCIELab ColorSpecification="CS1">',
+        b'<cc:ColorCIELab ColorSpecification="CS65"><cc:L>1</cc:L><cc:A>2</cc:A><cc:B>3</cc:B></cc:ColorCIELab>'
+        b'<cc:ColorCIELab ColorSpecification="CS1">').replace(
+        b'<cc:ColorSpecificationCollection>',
+        b'<cc:ColorSpecificationCollection><cc:ColorSpecification Id="CS65"><cc:TristimulusSpec>'
+        b'<cc:Illuminant>D65</cc:Illuminant><cc:Observer>10_Degree</cc:Observer></cc:TristimulusSpec>'
+        b'</cc:ColorSpecification>')
+    assert [s.lab for s in spot.parse_cxf3(both)] == [(48.0, 62.0, 38.0)]
 
 
 def test_cli_import_export_round_trip_and_name_matching(spots_dir, tmp_path, capsys):
@@ -220,6 +230,13 @@ def test_pdf_spots_print_their_recipes_and_others_their_alternate(spots_dir, tmp
         else:                                          # the alternate, as today
             assert list(got) == [179, 0, 255, 0]
             assert np.array_equal(plain[cy - 20:cy + 20, cx - 20:cx + 20], img[cy - 20:cy + 20, cx - 20:cx + 20])
+    # with the media's profile as the output profile the recipe is given in an ICCBased space
+    # of that very profile: Ghostscript links it as the identity, so the same inks print
+    icc_img, _ = _raster(pdf, RipSettings(output_icc=DEFAULT_OUTPUT_ICC))
+    for name, (x, y, rw, rh) in RECTS.items():
+        if name in BRAND:
+            cx, cy = int((x + rw / 2) / W_PT * w), int((H_PT - y - rh / 2) / H_PT * h)
+            assert np.array_equal(icc_img[cy, cx], img[cy, cx]), name
 
 
 def test_a_document_without_library_or_cut_colours_is_not_rewritten(spots_dir, tmp_path):
