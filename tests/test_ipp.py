@@ -167,7 +167,8 @@ def assert_roll(a: dict, width_mm: int, length_mm: int | None) -> None:
     else:
         assert a["media-ready"] == f"roll_main-roll_{width_mm}x{length_mm}mm"
         assert ready["media-size"]["y-dimension"] == length_mm * 100
-    # the default is the roll itself (CUPS fits jobs to the default: never A4 here)
+    # the default is the roll itself (CUPS fits jobs to the default: never A4 here), as
+    # long as a print may be: the roll left, else the longest print
     assert a["media-default"] == f"roll_main-roll_{width_mm}x{longest}mm"
     assert a["media-col-default"]["media-size"] == {"x-dimension": width_mm * 100,
                                                     "y-dimension": longest * 100}
@@ -239,6 +240,33 @@ def test_the_media_attributes_follow_the_paper_the_printer_measured(tmp_path):
             time.sleep(0.3)
         assert_roll(a, 3000, None)
         assert "iso_2a0_1189x1682mm" in a["media-supported"]
+        # the operator loads a 50 m roll (docs/server.md "Rolls"): its length is known now,
+        # and what is left of it after every job
+        roll = serve.client.roll("left", {"media": "vinyl-300", "length_m": 50})["roll"]
+        assert round(roll["width_mm"]) == 3000 and roll["remaining_mm"] == 50000
+
+        def ready_length(want):
+            deadline = time.monotonic() + 10
+            while True:
+                a = attrs(ipptool(serve.uris["left"], get)["Tests"][0])
+                y = a["media-col-ready"]["media-size"]["y-dimension"]
+                if want(y) or time.monotonic() > deadline:
+                    return a
+                time.sleep(0.3)
+        a = ready_length(lambda y: y == 5000000)
+        assert_roll(a, 3000, 50000)
+        job = serve.client.submit(src, name="strip2.tif")["job"]
+        end = time.monotonic() + 120
+        while serve.client.job(job["id"])["state"] not in ("done", "failed"):
+            assert time.monotonic() < end, "the job did not end"
+            time.sleep(0.2)
+        left = int(serve.client.roll("left")["roll"]["remaining_mm"])
+        assert 49000 < left < 50000, left
+        a = ready_length(lambda y: y == left * 100)
+        assert_roll(a, 3000, left)
+        serve.client.roll("left", {"unload": True})   # no roll known: the length is unknown again
+        a = ready_length(lambda y: isinstance(y, dict))
+        assert_roll(a, 3000, None)
     finally:
         if serve is not None:
             serve.stop()
