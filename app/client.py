@@ -282,6 +282,11 @@ class Client:
     def preview(self, job_id: int, px: int | None = None) -> dict:
         return self.request("GET", f"/v1/jobs/{job_id}/preview" + (f"?px={px}" if px else ""))
 
+    def proof_png(self, job_id: int, px: int | None = None) -> bytes:
+        """The job's soft proof through its media, with the gamut warning (PNG)."""
+        return self.request("GET", f"/v1/jobs/{job_id}/proof.png" + (f"?px={px}" if px else ""),
+                            binary=True)
+
     def preview_png(self, job_id: int, px: int | None = None) -> bytes:
         return self.request("GET", f"/v1/jobs/{job_id}/preview.png" + (f"?px={px}" if px else ""),
                             binary=True)

@@ -131,3 +131,8 @@ def proof_cmyk(ink: np.ndarray, media_icc: str | None = None) -> Proof:
 def write_proof(proof: Proof, png: str) -> None:
     """The proof with its gamut warning as a PNG (libvips)."""
     _vips_image(proof.with_warning(), "srgb").pngsave(png)
+
+
+def png_bytes(proof: Proof) -> bytes:
+    """The proof with its gamut warning as PNG bytes (for the server's clients)."""
+    return _vips_image(proof.with_warning(), "srgb").pngsave_buffer()

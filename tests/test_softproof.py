@@ -112,3 +112,28 @@ def test_proof_needs_a_preview_to_write(chart):
     r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "rip", str(chart / "chart.png"),
                         "-o", str(chart / "p.tif"), "--proof"], capture_output=True, text=True)
     assert r.returncode == 2 and "--proof" in r.stderr
+
+
+def test_the_server_gives_a_jobs_soft_proof(chart, tmp_path):
+    from wideprint.app.server import PrintServer, ServerConfig
+    from wideprint.app.server_cli import Client
+    srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", port=0, start_paused=True))
+    srv.start()
+    client = Client(srv.state_dir)
+    try:
+        job = client.submit(chart / "chart.png",
+                            settings={"placement": {"size": "pixels"}})["job"]
+        import io
+        png = np.asarray(Image.open(io.BytesIO(client.proof_png(job["id"], 400))).convert("RGB"))
+        profile = load_profile(None)
+        rgb = np.asarray(Image.open(chart / "chart.png"))
+        want = proof_job(str(chart / "chart.png"), from_mapping({"placement": {"size": "pixels"}},
+                                                                profile), profile, max_px=400)
+        assert png.shape == want.rgb.shape and png.shape[1] == 400
+        assert np.array_equal(png, want.with_warning())
+        assert rgb.shape[1] == 5 * SIDE
+        info = client.preview(job["id"], 400)
+        assert info["out_of_gamut"] == pytest.approx(0.2, abs=0.01)
+    finally:
+        client.close()
+        srv.stop(timeout=5)

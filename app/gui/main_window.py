@@ -352,6 +352,7 @@ class MainWindow(QMainWindow):
         self.preview = PreviewPanel()
         for cb in self.preview.seps.values():        # the server's preview shows every ink
             cb.hide()
+        self.preview.proof.toggled.connect(self._proof_toggled)
         ml.addWidget(self.preview, 1)
         self.estimate = EstimateBox()
         ml.addWidget(self.estimate)
@@ -593,7 +594,9 @@ class MainWindow(QMainWindow):
             title += " — printed or printing: settings shown, not editable"
         self.form.show_jobs(jobs, title, editable=editable)
         j = jobs[0]
-        key = (j["id"], repr(j.get("settings")), j["copies"], j["state"] in ("done", "failed", "cancelled"))
+        proof = self.preview.proof.isChecked()
+        key = (j["id"], repr(j.get("settings")), j["copies"], j["state"] in ("done", "failed", "cancelled"),
+               proof)
         if key == self._shown_key:
             return
         self._shown_key = key
@@ -606,9 +609,15 @@ class MainWindow(QMainWindow):
         else:
             self.estimate.clear("Estimating…")
             self.link.call(lambda c, _id=j["id"]: (c.preview(_id, PREVIEW_PX),
-                                                   c.preview_png(_id, PREVIEW_PX)),
+                                                   (c.proof_png if proof else c.preview_png)(
+                                                       _id, PREVIEW_PX)),
                            lambda r, _k=key, _j=j: self._preview_done(_k, _j, r),
                            lambda msg, _k=key: self._preview_failed(_k, msg))
+
+    def _proof_toggled(self, _on: bool) -> None:
+        """The preview as the media prints it (soft proof) or as the halftone's dots."""
+        self._shown_key = None
+        self._show_selection()
 
     def _preview_done(self, key, job: dict, result) -> None:
         if key != self._shown_key:

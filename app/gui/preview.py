@@ -7,12 +7,14 @@ import math
 
 import numpy as np
 from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QBrush, QColor, QFont, QImage, QPainter, QPen, QPixmap
-from PySide6.QtWidgets import (QCheckBox, QGraphicsPixmapItem, QGraphicsRectItem, QGraphicsScene,
+from PySide6.QtGui import QBrush, QColor, QFont, QImage, QPainter, QPainterPath, QPen, QPixmap
+from PySide6.QtWidgets import (QCheckBox, QGraphicsPathItem, QGraphicsPixmapItem, QGraphicsRectItem,
+                               QGraphicsScene,
                                QGraphicsView, QGridLayout, QHBoxLayout,
                                QLabel, QSizePolicy, QToolButton, QVBoxLayout, QWidget)
 
 INK_COLORS = {"C": "#00aeef", "M": "#ec008c", "Y": "#e6d200", "K": "#231f20"}
+CUT_COLOR = "#ff3d00"   # cut lines (docs/cut.md): an orange red no ink prints, never a CMYK colour
 RULER = 22          # ruler thickness, px
 
 
@@ -171,6 +173,12 @@ class PreviewPanel(QWidget):
             cb.toggled.connect(self._seps_changed)
             bar.addWidget(cb)
             self.seps[name] = cb
+        # the soft proof (docs/color.md): the job as its media prints it, gamut warning on
+        self.proof = QCheckBox("Proof")
+        self.proof.setObjectName("proof")
+        self.proof.setToolTip("Soft proof: the job as its media will print it (its ICC profile "
+                              "and ink limit); colours the media cannot print are striped grey")
+        bar.addWidget(self.proof)
         bar.addSpacing(12)
         for text, tip, slot in (("−", "Zoom out (Ctrl+wheel)", lambda: self.view.set_zoom(self.view.zoom / 1.5, True)),
                                 ("+", "Zoom in (Ctrl+wheel)", lambda: self.view.set_zoom(self.view.zoom * 1.5, True)),
@@ -219,6 +227,10 @@ class PreviewPanel(QWidget):
         self.frame_item = QGraphicsRectItem()
         self.frame_item.setPen(QPen(QColor("#1565c0"), 0))
         self.scene.addItem(self.frame_item)
+        self.cut_item = QGraphicsPathItem()          # a print-and-cut job's cut lines
+        cut_pen = QPen(QColor(CUT_COLOR), 0)         # cosmetic: one screen pixel at any zoom
+        self.cut_item.setPen(cut_pen)
+        self.scene.addItem(self.cut_item)
         self.overlay = QLabel(self.view.viewport())
         self.overlay.setObjectName("preview_message")
         self.overlay.setWordWrap(True)
@@ -256,8 +268,22 @@ class PreviewPanel(QWidget):
         r = self.paper_item.rect().adjusted(-0.05 * self.paper_mm, -lead, 0.05 * self.paper_mm, lead)
         self.scene.setSceneRect(r)
 
+    def set_cut_paths(self, lines) -> None:
+        """A print-and-cut job's cut lines over its picture, in their own colour: polylines
+        in millimetres of the sheet (the cut file's frame, docs/cut.md); [] for none."""
+        path = QPainterPath()
+        for line in lines:
+            if len(line) < 2:
+                continue
+            path.moveTo(QPointF(float(line[0][0]), float(line[0][1])))
+            for x, y in line[1:]:
+                path.lineTo(QPointF(float(x), float(y)))
+        self.cut_item.setPath(path)
+        self.cut_item.setPos(QPointF(self.margin_mm, 0))
+
     def show_message(self, text: str) -> None:
         """No picture: the empty media and a message over it (errors, hints)."""
+        self.cut_item.setPath(QPainterPath())
         self.image_item.setPixmap(QPixmap())
         self.has_image = False
         self.image_mm = (0.0, 0.0)

@@ -686,7 +686,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                 job_id = parse_number(route[1])
                 if job_id is None:
                     raise Invalid(f"no job {route[1][:40]!r} (job ids are whole numbers)", 404)
-                self._query(url.query, ("px",) if route[2:] in (["preview"], ["preview.png"]) else ())
+                self._query(url.query, ("px",) if route[2:] in (["preview"], ["preview.png"],
+                                                                ["proof.png"]) else ())
                 if method == "GET" and len(route) == 2:
                     job = self.srv.spool.get(job_id)
                     if job is None:
@@ -707,6 +708,14 @@ class ApiHandler(BaseHTTPRequestHandler):
                 if method == "PATCH" and len(route) == 2:
                     self._may_act(job_id, "edit")
                     return self._json(200, self._job(self.srv.edit(job_id, body)))
+                if method == "GET" and len(route) == 3 and route[2] == "proof.png":
+                    job = self.srv.spool.get(job_id)
+                    if job is None:
+                        raise Invalid(f"no job {job_id}", 404)
+                    q = self._query(url.query, ("px",))
+                    px = _check_int("px", _number("px", q["px"]), *PREVIEW_PX) if "px" in q \
+                        else THUMB_PX
+                    return self._send(200, self.srv.previews.proof_png(job, px), "image/png")
                 if method == "GET" and len(route) == 3 and route[2] in ("preview", "preview.png"):
                     job = self.srv.spool.get(job_id)
                     if job is None:

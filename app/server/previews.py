@@ -109,6 +109,23 @@ class Previews:
                 return thumb.read_bytes()
             raise
 
+    def proof_png(self, job: dict, px: int) -> bytes:
+        """The job's soft proof as PNG (docs/color.md "Soft proof"): the file through its
+        media's profile with the gamut warning, at most `px` on its longer side."""
+        from ...rip.load import ImageError
+        from ..jobpreview import proof_job
+        from ..softproof import png_bytes
+        path = job.get("spool_path")
+        if not path or not os.path.exists(path):
+            raise Invalid(f"job {job['id']}: its file is no longer spooled (no proof)", 410)
+        with self._one:
+            try:
+                rs, profile = job_rip_settings(job["settings"], self._profile(job),
+                                               self.srv.state_dir)
+                return png_bytes(proof_job(path, rs, profile, max_px=px))
+            except (ImageError, ValueError, OSError) as exc:
+                raise Invalid(str(exc).replace(path, job["name"]), 422) from None
+
     def info(self, job: dict, px: int = THUMB_PX) -> dict:
         """Size, strokes, and the estimate per copy and for all copies (docs/server.md)."""
         pd = self.get(job, px)
