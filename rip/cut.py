@@ -450,11 +450,17 @@ def server_cut_path(state_dir, job_id: int, name: str) -> str:
 
 
 def write_cut_files(state_dir, job_id: int, rip, settings, profile) -> dict:
-    """A server job's cut files, HP-GL/2 and DXF, from one extraction; the `cut` report."""
+    """A server job's cut files, HP-GL/2 and DXF, from one extraction; the `cut` report.
+    `rip` is the job's RipJob, or its list of files (they are laid out as it would be)."""
     from .cutfile import write_cut_file
-    plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
-    files = [rip.path, *getattr(rip, "more", ())]
-    job = cut_job(files if plan is not None else rip.path, settings, profile, None, plan)
+    if isinstance(rip, (list, tuple)):
+        from .layout import plan_layout, wants_layout
+        files = [os.fspath(f) for f in rip]
+        plan = plan_layout(files, settings, profile) if wants_layout(settings.placement, files[1:]) else None
+    else:
+        plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
+        files = [rip.path, *getattr(rip, "more", ())]
+    job = cut_job(files if plan is not None else files[0], settings, profile, None, plan)
     os.makedirs(os.path.join(os.fspath(state_dir), "cut"), exist_ok=True)
     for name in SERVER_CUT_FILES:
         path = server_cut_path(state_dir, job_id, name)

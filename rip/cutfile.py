@@ -28,7 +28,7 @@ import numpy as np
 from .cut import CutJob
 
 __all__ = ["UNITS_PER_MM", "CUT_FORMATS", "cut_format", "write_cut_file", "write_hpgl",
-           "write_dxf", "read_cut_file", "read_hpgl", "read_dxf"]
+           "write_dxf", "read_cut_file", "read_hpgl", "parse_hpgl", "read_dxf"]
 
 UNITS_PER_MM = 40                      # HP-GL plotter units (0.025 mm)
 CUT_FORMATS = {".plt": "hpgl", ".hpgl": "hpgl", ".hpg": "hpgl", ".dxf": "dxf"}
@@ -80,7 +80,12 @@ def write_hpgl(path: str, job: CutJob) -> None:
 def read_hpgl(path: str) -> tuple[list[np.ndarray], list[tuple[str, float, float]]]:
     """The pen-down polylines of an HP-GL/2 file (sheet millimetres) and the REGMARK
     comments (place, x mm, y mm)."""
-    text = open(path).read()
+    with open(path) as f:
+        return parse_hpgl(f.read())
+
+
+def parse_hpgl(text: str) -> tuple[list[np.ndarray], list[tuple[str, float, float]]]:
+    """read_hpgl of the file's text."""
     marks = [(m.group(1), float(m.group(3)) / UNITS_PER_MM, float(m.group(2)) / UNITS_PER_MM)
              for m in re.finditer(r'CO"REGMARK (\S+) \S+ (-?[\d.]+),(-?[\d.]+)"', text)]
     text = re.sub(r'CO"[^"]*";?', "", text)

@@ -257,6 +257,11 @@ def test_print_server_keeps_the_cut_files_with_the_job(decal, print_server):
     try:
         job = c.submit(d / "decal.pdf", settings={"dpi": 150, "placement": {"scale": 1.5, "marks": "cut"}})["job"]
         plain = c.submit(d / "decal.pdf", settings={"dpi": 150}, hold=True)["job"]
+        held = c.submit(d / "decal.pdf", settings={"dpi": 150, "placement": {"scale": 1.5, "marks": "cut"}},
+                        hold=True)["job"]
+        early = d / "held.plt"                            # not ripped yet: made from its spooled file
+        early.write_bytes(c.cut_file(held["id"], "plt"))
+        assert early.read_bytes() == (d / "decal.plt").read_bytes()
         assert c.wait(job["id"], timeout=120)["state"] == "done"
         for ext, read in (("plt", read_hpgl), ("dxf", read_dxf)):
             got = d / f"server.{ext}"
@@ -388,3 +393,20 @@ def test_layouts_carry_their_items_cut_paths_and_marks(tmp_path):
     for p in tjob.paths:                    # each piece lies within its tile's slot
         assert any(g.mm_x(s.x) - 1e-6 <= p.points[:, 0].min() and p.points[:, 0].max()
                    <= g.mm_x(s.x + s.item.width) + 1e-6 for s in tplan.slots)
+
+
+def test_gui_preview_draws_cut_lines_in_their_own_colour(qtbot):
+    """The GUI's preview draws a print-and-cut job's cut lines over the picture, in the
+    sheet's millimetres, in a colour no ink has; a message clears them."""
+    from wideprint.app.gui.preview import CUT_COLOR, INK_COLORS, PreviewPanel
+    panel = PreviewPanel()
+    qtbot.addWidget(panel)
+    panel.set_image(np.full((100, 200, 3), 255, np.uint8), 200.0, 100.0, "job")
+    panel.set_cut_paths([np.array([[10.0, 5.0], [190.0, 5.0], [190.0, 95.0], [10.0, 5.0]]), np.zeros((1, 2))])
+    r = panel.cut_item.sceneBoundingRect()
+    assert abs(r.left() - (panel.margin_mm + 10)) < 0.01 and abs(r.top() - 5) < 0.01
+    assert abs(r.width() - 180) < 0.01 and abs(r.height() - 90) < 0.01
+    assert panel.cut_item.path().elementCount() == 4
+    assert panel.cut_item.pen().color().name() == CUT_COLOR and CUT_COLOR not in INK_COLORS.values()
+    panel.show_message("no job")
+    assert panel.cut_item.path().isEmpty()

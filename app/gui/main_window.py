@@ -633,6 +633,20 @@ class MainWindow(QMainWindow):
             info = dict(width_mm=w, height_mm=h)
         self.preview.set_image(rgb, info["width_mm"], info["height_mm"],
                                f"Job {job['id']}: {safe(job['name'])}")
+        self._show_cut(key, job)
+
+    def _show_cut(self, key, job: dict) -> None:
+        """A print-and-cut job's cut lines over its preview, from its cut file (docs/cut.md)."""
+        self.preview.set_cut_paths([])
+        if ((job.get("settings") or {}).get("placement") or {}).get("marks") != "cut":
+            return
+        from ..rip.cutfile import parse_hpgl
+
+        def done(lines, _k=key) -> None:
+            if _k == self._shown_key:
+                self.preview.set_cut_paths(lines)
+        self.link.call(lambda c, _id=job["id"]: parse_hpgl(c.cut_file(_id, "plt").decode())[0], done,
+                       lambda msg: None)
 
     def _preview_failed(self, key, message: str) -> None:
         if key != self._shown_key:

@@ -694,15 +694,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                         raise Invalid(f"no job {job_id}", 404)
                     return self._json(200, self._job(job))
                 if method == "GET" and len(route) == 3 and route[2] in ("cut.plt", "cut.dxf"):
-                    from ...rip.cut import server_cut_path        # print and cut (docs/cut.md)
-                    if self.srv.spool.get(job_id) is None:
-                        raise Invalid(f"no job {job_id}", 404)
-                    try:
-                        with open(server_cut_path(self.srv.state_dir, job_id, route[2]), "rb") as fh:
-                            data = fh.read()
-                    except FileNotFoundError:
-                        raise Invalid(f"job {job_id} has no cut file: it is not a print-and-cut job "
-                                      f"(placement marks cut) or has not been ripped yet", 404) from None
+                    data = self._cut_file(job_id, route[2])    # print and cut (docs/cut.md)
                     return self._send(200, data, "application/vnd.hp-hpgl" if route[2] == "cut.plt"
                                       else "image/vnd.dxf")
                 if method == "PATCH" and len(route) == 2:
@@ -846,6 +838,27 @@ class ApiHandler(BaseHTTPRequestHandler):
         except (Invalid, ValueError) as exc:
             status = exc.status if isinstance(exc, Invalid) else 400
             return self._error(status, str(exc), close=bool(self._body_left))
+
+    def _cut_file(self, job_id: int, name: str) -> bytes:
+        """A print-and-cut job's cut file (docs/cut.md): as its rip wrote it, or made now
+        from its spooled file (a queued job, for the GUI's preview)."""
+        import os
+        from ...rip.cut import server_cut_path, write_cut_files
+        from .validate import job_rip_settings
+        path = server_cut_path(self.srv.state_dir, job_id, name)
+        job = self.srv.spool.get(job_id)
+        if job is None:
+            raise Invalid(f"no job {job_id}", 404)
+        if not os.path.exists(path):
+            rs, media_profile = job_rip_settings(job["settings"], self.srv.profile, self.srv.state_dir)
+            if rs.placement.marks != "cut":
+                raise Invalid(f"job {job_id} has no cut file: it is not a print-and-cut job "
+                              f"(placement marks cut)", 404)
+            if not job.get("spool_path"):
+                raise Invalid(f"job {job_id}: its file is no longer spooled", 410)
+            write_cut_files(self.srv.state_dir, job_id, [job["spool_path"]], rs, media_profile)
+        with open(path, "rb") as fh:
+            return fh.read()
 
     def _submit(self) -> None:
         srv = self.srv
