@@ -232,6 +232,10 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
     from wideprint.app.server_cli import Client
     url = f"http://127.0.0.1:{shop.port}/"
     client = Client(shop.state_dir, url=url.rstrip("/"))
+    # the operator's shop: a price list, a 50 m roll on the left printer (docs/server.md)
+    client.prices({"currency": "EUR", "ink_per_ml": {c: 0.12 for c in "cmyk"},
+                   "media_per_m2": {"default": 8.0}, "machine_per_hour": 30.0})
+    client.roll("left", {"media": "vinyl-300", "length_m": 50})
     first = client.submit(banner(tmp_path / "shop-banner.tif"), name="shop-banner.tif")["job"]
     driver = chromium()
     try:
@@ -267,6 +271,8 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
                            if len(d.find_elements(By.CSS_SELECTOR, "#printers .card")) == 2 else None)
         assert [c.get_attribute("data-printer") for c in cards] == ["left", "right"]
         assert "paused" in cards[0].text
+        assert "vinyl-300" in cards[0].text and "50.0 m left" in cards[0].text, cards[0].text
+        assert "vinyl-300" not in cards[1].text              # no roll known on the right one
         row = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, f"#queue tr[data-job='{first['id']}']"))
         assert "shop-banner.tif" in row.text and row.get_attribute("data-state") == "queued"
         # a job submitted behind the page's back appears live (the event stream, no reload)
@@ -296,6 +302,12 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
                 "return [...document.querySelectorAll('#printers .card')]"
                 ".map(c => c.innerText).filter(t => t.includes('.tif'))"))
         assert any("shop-banner.tif" in t or "second.tif" in t for t in seen_printing)
+        # the screenshot once a progress bar moves, if the jobs are not done before that
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not driver.execute_script(
+                "return [...document.querySelectorAll('#printers .bar')]"
+                ".some(b => +b.getAttribute('aria-valuenow') > 0)"):
+            time.sleep(0.02)
         shot(driver, tmp_path, "web-printing-1366x768")
         for job in (first, second):
             WebDriverWait(driver, 180, poll_frequency=0.2,
@@ -306,6 +318,9 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
         wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#per-day tbody tr"))
         day = driver.find_element(By.CSS_SELECTOR, "#per-day tbody tr").text.split()
         assert day[1] == "2", day                     # two copies printed today
+        assert driver.find_element(By.CSS_SELECTOR, "#per-day th.cost").text == "Cost (EUR)"
+        cost = sum(r["cost"]["total"] for r in client.report_costs()["prints"])
+        assert cost > 0 and day[-1] == f"{cost:.2f}", (day, cost)   # the price list's cost
         assert not driver.find_elements(By.CSS_SELECTOR, "#queue tbody tr")
         driver.execute_script("window.scrollTo(0, 0)")
         shot(driver, tmp_path, "web-history-1366x768")

@@ -181,7 +181,8 @@ function duration(s) {
 function when(epoch) {
   if (!epoch) return "";
   const d = new Date(epoch * 1000);
-  return d.toLocaleString(undefined, {month: "short", day: "numeric", hour: "2-digit", minute: "2-digit"});
+  return d.toLocaleString(undefined, {month: "short", day: "numeric", hour: "2-digit",
+                                      minute: "2-digit", hourCycle: "h23"});
 }
 
 const num = (v, digits) => (v === null || v === undefined || !isFinite(v)) ? "" :
@@ -238,7 +239,8 @@ function showPrinters(printers) {
     const card = el("div", {class: "card" + (p.fault ? " fault" : ""), "data-printer": p.name},
       el("div", {class: "top"}, el("span", {class: "name"}, p.name),
          el("span", {class: `state ${state}`}, state), p.paused && p.state === "printing" ? el("span", {class: "muted"}, "pausing") : null,
-         el("span", {class: "grow"}), el("span", {class: "muted small"}, rollText(p))));
+         el("span", {class: "grow"}), el("span", {class: "muted small"}, p.device || "")),
+      el("div", {class: "muted small roll"}, rollText(p)));
     if (cur) {
       const done = cur.strokes_printed || 0, total = cur.strokes_total || 0;
       const left = timeLeft(p);
@@ -373,8 +375,9 @@ function showAccounting(rows, jobs, currency) {
     body.replaceChildren();
     for (const k of sortKeys([...m.keys()])) {
       const g = m.get(k);
-      body.append(el("tr", {}, el("td", {}, k || "—"), el("td", {}, g.copies), el("td", {}, num(g.area, 2)),
-                     el("td", {}, num(g.ink, 1)), el("td", {}, duration(g.time)),
+      body.append(el("tr", {}, el("td", {}, k || "—"), el("td", {}, g.copies),
+                     el("td", {}, num(g.area, g.area < 10 ? 3 : 1)),
+                     el("td", {}, num(g.ink, g.ink < 10 ? 2 : 1)), el("td", {}, duration(g.time)),
                      el("td", {}, g.priced ? num(g.cost, 2) : "—")));
     }
   };
