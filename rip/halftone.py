@@ -127,8 +127,8 @@ from .settings import METHODS, ORDERED  # noqa: E402 - declared with the setting
 ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
 #: error diffusion with variable coefficients (rip/diffusion.py): independent channels, and
-#: colour-aware pairs (C with M, Y with K)
-VARIABLE = ("vced", "vector")
+#: colour-aware pairs (C with M, Y with K); ``dbs`` refines vced's dots (rip/dbs.py)
+VARIABLE = ("vced", "vector", "dbs")
 
 # 5-wide, 3-row diffusion kernels, scan direction left to right, "*" is the
 # current pixel:             [*, x+1, x+2], row+1: [x-2..x+2], row+2: [x-2..x+2]
@@ -480,6 +480,9 @@ class Halftoner:
             from .diffusion import VCDiffuser
             self._vc = VCDiffuser(width, channels, modulation_noise(), joint=method == "vector")
             self._err = self._vc.err
+            if method == "dbs":
+                from .dbs import RowDBS
+                self._dbs = RowDBS(width, channels, self._vc.noise, self._vc.offsets)
         else:
             if method == "bayer":
                 ranks = bayer_matrix(16)
@@ -548,6 +551,8 @@ class Halftoner:
             self._vc.row = row0
             _run_parallel(self._vc.jobs(src, out, groups))
             self._vc.row = row0 + rows
+            if self.method == "dbs":        # vced's dots refined row by row (rip/dbs.py)
+                _run_parallel(self._dbs.jobs(src, out, row0, groups))
         elif self.method == "fs" and self.channels == 4:
             # one loop of four inks on one thread (see `_fs_four`)
             _fs_four(band if band.flags.c_contiguous else np.ascontiguousarray(band), out, self._err, row0)
