@@ -5,7 +5,8 @@ a spot colour of one of these names is a cut line: it is never printed (no drop 
 whatever its stroke width) and it becomes the job's cut file. The names differ by vendor
 (Roland VersaWorks and Summa: CutContour, PerfCutContour; Caldera: Thru-cut, KissCut;
 Wasatch: CutPath; die-line files: Die*, Dieline), so the list is a set of patterns matched
-case-insensitively with shell wildcards, and a shop can replace it.
+case-insensitively with shell wildcards, and a shop can replace or extend it
+($WIDEPRINT_CUT_NAMES, below).
 
 Standard library only: the rendering (rip/ghostscript.py, which must leave these
 separations out) and the cut-path extraction (rip/cut.py) both ask this one module.
@@ -14,6 +15,7 @@ separations out) and the cut-path extraction (rip/cut.py) both ask this one modu
 from __future__ import annotations
 
 import fnmatch
+import os
 from typing import Iterable
 
 #: the conventional cut spot names (patterns, case-insensitive)
@@ -23,8 +25,25 @@ DEFAULT_CUT_NAMES: tuple[str, ...] = (
 )
 
 
+#: the shop's own list (docs/cut.md "Cut spot names"): comma-separated patterns that replace
+#: the defaults, or, starting with "+", are added to them (a printing server's unit file,
+#: the operator's shell); read at each call, so the render and the cut file always agree
+ENV = "WIDEPRINT_CUT_NAMES"
+
+
+def cut_names() -> tuple[str, ...]:
+    """The cut spot name patterns in force: $WIDEPRINT_CUT_NAMES, else the defaults."""
+    env = os.environ.get(ENV, "").strip()
+    if not env:
+        return DEFAULT_CUT_NAMES
+    extra = env.startswith("+")
+    own = tuple(p.strip() for p in env.lstrip("+").split(",") if p.strip())
+    return (*DEFAULT_CUT_NAMES, *own) if extra else own
+
+
 def is_cut_name(name: str, patterns: Iterable[str] | None = None) -> bool:
-    """True when a spot colour called `name` is a cut line under `patterns` (default list)."""
+    """True when a spot colour called `name` is a cut line under `patterns` (default: the
+    list in force, `cut_names()`)."""
     folded = name.strip().casefold()
     return any(fnmatch.fnmatchcase(folded, p.strip().casefold())
-               for p in (DEFAULT_CUT_NAMES if patterns is None else patterns))
+               for p in (cut_names() if patterns is None else patterns))

@@ -128,6 +128,18 @@ def test_cut_names_are_the_conventional_ones():
     assert is_cut_name("Contour", ["contour"]) and not is_cut_name("CutContour", ["contour"])
 
 
+
+def test_a_shop_sets_its_own_cut_names(monkeypatch):
+    """$WIDEPRINT_CUT_NAMES replaces the list, or with a leading + adds to it; the render
+    and the cut file ask the same function, so they agree."""
+    monkeypatch.setenv("WIDEPRINT_CUT_NAMES", "Schnitt*, Konturschnitt")
+    assert is_cut_name("Schnittkontur") and is_cut_name("KONTURSCHNITT") and not is_cut_name("CutContour")
+    monkeypatch.setenv("WIDEPRINT_CUT_NAMES", "+Schnitt*")
+    assert is_cut_name("Schnittkontur") and is_cut_name("CutContour")
+    monkeypatch.delenv("WIDEPRINT_CUT_NAMES")
+    assert not is_cut_name("Schnittkontur") and is_cut_name("CutContour")
+
+
 @pytest.mark.parametrize("ext", ["plt", "dxf"])
 def test_cut_file_path_equals_the_pdf_path_on_the_sheet(decal, ext):
     d, runs = decal
@@ -410,3 +422,31 @@ def test_gui_preview_draws_cut_lines_in_their_own_colour(qtbot):
     assert panel.cut_item.pen().color().name() == CUT_COLOR and CUT_COLOR not in INK_COLORS.values()
     panel.show_message("no job")
     assert panel.cut_item.path().isEmpty()
+
+
+def test_pages_follow_each_other_with_their_cut_paths(tmp_path):
+    """A two-page document prints its pages one after another along the roll: each page's
+    cut path is on its own page's print (the page gap included)."""
+    from wideprint.rip.cut import cut_job
+    from wideprint.rip.document import open_document
+    pdf = pikepdf.new()
+    fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0], C1=[0, 1, 0, 0], N=1)
+    cs = pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/CutContour"), pikepdf.Name.DeviceCMYK,
+                        pdf.make_indirect(fn)])
+    for rect, box in (("30 20 100 60", [0, 0, 200, 150]), ("50 40 60 50", [0, 0, 160, 120])):
+        page = pikepdf.Dictionary(Type=pikepdf.Name.Page, MediaBox=box,
+                                  Resources=pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(CS0=cs)),
+                                  Contents=pdf.make_stream(f"/CS0 CS 1 SCN {rect} re S 0 0 0 1 k {rect} re f".encode()))
+        pdf.pages.append(pikepdf.Page(page))
+    pdf.save(tmp_path / "two.pdf")
+    st = settings_for(dpi=150, page_gap_mm=12)
+    with open_document(str(tmp_path / "two.pdf"), "pdf", st, load_profile()) as doc:
+        k = (np.concatenate(list(doc.bands(256)))[..., 3] > 127).astype(np.uint8)
+    n, _, stats, _ = cv2.connectedComponentsWithStats(k)
+    col, row = 25.4 / 150, ROW_UM / 1000
+    printed = sorted((x * col, y * row, (x + w) * col, (y + h) * row) for x, y, w, h, _ in stats[1:])
+    job = cut_job(str(tmp_path / "two.pdf"), st, load_profile())
+    cut = sorted((p.points[:, 0].min(), p.points[:, 1].min(), p.points[:, 0].max(), p.points[:, 1].max())
+                 for p in job.paths)
+    assert n - 1 == 2 and len(cut) == 2
+    assert np.abs(np.subtract(cut, printed)).max() <= col + 0.01, (cut, printed)
