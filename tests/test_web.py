@@ -324,6 +324,13 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
         assert not driver.find_elements(By.CSS_SELECTOR, "#queue tbody tr")
         driver.execute_script("window.scrollTo(0, 0)")
         shot(driver, tmp_path, "web-history-1366x768")
+        # a done job printed again from its archived file (docs/server.md "Archive and reprint")
+        click(driver, f"#history tr[data-job='{first['id']}'] button[data-action='reprint']")
+        again = WebDriverWait(driver, 30, poll_frequency=0.1).until(
+            lambda d: [j for j in client.jobs("queued,held,printing,done")
+                       if j.get("reprint_of") == first["id"]])
+        assert again[0]["name"] == "shop-banner.tif" and again[0]["sha256"] == first["sha256"]
+        assert not driver.find_element(By.ID, "message").is_displayed()    # no error said
         # sign out: the page is the login form again and the cookie reads nothing
         click(driver, "#logout")
         wait.until(lambda d: d.find_element(By.ID, "login").is_displayed())
