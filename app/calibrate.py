@@ -1,5 +1,6 @@
-"""`wideprint calibrate nozzles|bidir|heads|feed|wedge --scan SCAN.tif`: calibration from a
-scan of a test print (docs/calibration.md; the wedge: docs/color.md "Linearisation").
+"""`wideprint calibrate nozzles|bidir|heads|feed|wedge|banding --scan SCAN.tif`: calibration
+from a scan of a test print (docs/calibration.md; the wedge: docs/color.md "Linearisation";
+the banding chart, measured and not written: docs/quality.md).
 
 The pattern is rebuilt from the profile, dpi and width it was printed with
 (`rip.testprints.scan_layout`), so every mark's model position is known. In the scan the
@@ -125,6 +126,7 @@ class Scan:
         self.row_um = profile.row_um
         self.grey = dark.shape[2] == 1
         self.reg = self._register()
+        self.passes: int | None = None  # the weave of a banding chart (its periods)
 
     def band(self, channel: int) -> np.ndarray:
         return self.dark[:, :, 0 if self.grey else BAND[channel]]
@@ -172,6 +174,12 @@ class Scan:
         bars = self.layout.bars
         want = [(b.c1 - b.c0) * self.col_um * (b.r1 - b.r0) * self.row_um / self.pix ** 2
                 for b in bars]
+        # the bars are the two objects of a bar's size farthest left and right: a chart of
+        # dark tints (the banding chart) has larger objects between them
+        areas = stats[1:, cv2.CC_STAT_AREA]
+        fits = np.flatnonzero((areas >= 0.4 * min(want)) & (areas <= 2.5 * max(want))) + 1
+        if len(fits) >= 2:
+            order = np.array([fits[np.argmin(cents[fits, 0])], fits[np.argmax(cents[fits, 0])]])
         for i in order:
             area = stats[i, cv2.CC_STAT_AREA]
             if not 0.4 * min(want) <= area <= 2.5 * max(want):
@@ -456,12 +464,31 @@ def parse_values(items: list[str]) -> dict[str, list[float]]:
     return out
 
 
+def calibrate_banding(scan: Scan, res: Result) -> None:
+    """The banding chart's tints where the registration puts them: banding, graininess and
+    mottle (app/quality.py, docs/quality.md); nothing to write."""
+    from .quality import lightness_from_levels, measure_registered, weave_periods
+    light = lightness_from_levels(scan.white[None, None, :] - scan.dark, scan.white)
+    patches = [(m.head, m.c0 * scan.col_um, m.r0 * scan.row_um, m.c1 * scan.col_um,
+                m.r1 * scan.row_um) for m in scan.layout.marks]
+    periods = weave_periods(scan.passes, scan.profile) if scan.passes else None
+    tints = measure_registered(light, scan.reg.M, scan.pix, patches, periods=periods)
+    res.found["tints"] = {q.name: dict(banding=q.banding, period_mm=q.period_mm,
+                                       graininess=q.graininess, mottle=q.mottle,
+                                       lightness=q.lightness) for q in tints}
+    for q in tints:
+        res.text.append(f"{q.name:<10} L* {q.lightness:5.1f}  banding {q.banding:.3f} ΔL*"
+                        + (f" (period {q.period_mm:.3f} mm)" if q.period_mm else "")
+                        + f"  graininess {q.graininess:.3f}  mottle {q.mottle:.3f}")
+
+
 CALIBRATIONS = {"nozzles": calibrate_nozzles, "bidir": calibrate_bidir,
-                "heads": calibrate_heads, "feed": calibrate_feed, "wedge": calibrate_wedge}
+                "heads": calibrate_heads, "feed": calibrate_feed, "wedge": calibrate_wedge,
+                "banding": calibrate_banding}
 
 
 def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width_mm: float = 100.0,
-              scan_dpi: float | None = None) -> Result:
+              scan_dpi: float | None = None, passes: int | None = None) -> Result:
     """Measure a scan of the `kind` pattern printed with `profile` at `dpi`, `width_mm`."""
     from ..rip.testprints import scan_layout
     k = profile.k(dpi)
@@ -469,6 +496,7 @@ def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width
     layout = scan_layout(KINDS[kind], profile, width, dpi)
     dark, white, sdpi = read_scan_white(scan_path, scan_dpi)
     scan = Scan(dark, sdpi, layout, profile, dpi, white)
+    scan.passes = passes                # the banding chart's weave (its periods)
     res = Result(kind, dpi)
     res.text.append(f"{scan_path}: {KINDS[kind]} at {dpi} dpi found on a {sdpi:g} dpi scan, "
                     f"rotated {scan.reg.rotation_deg:+.2f}°, scale {scan.reg.scale:.4f}")
@@ -496,7 +524,8 @@ def cmd_calibrate(args) -> int:
         elif not args.scan:
             raise ValueError("--scan SCAN.tif is required" + (" (or --values)" if args.kind == "wedge" else ""))
         else:
-            res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi)
+            res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi,
+                            getattr(args, "passes", None))
     except (ValueError, ProfileError, OSError) as exc:
         print(f"wideprint calibrate: {exc}", file=sys.stderr)
         return EXIT_USAGE

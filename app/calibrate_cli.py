@@ -21,9 +21,10 @@ def add_parser(sub) -> None:
                        description="Finds the test pattern in a scan (any placement, a few "
                        "degrees of rotation), measures it and reports dead nozzles, the "
                        "bidirectional offset, head x/y offsets, the feed error or the inks' tone "
-                       "curves; --write stores it in --profile. Print the pattern first: "
+                       "curves, or the banding chart's banding and grain; --write stores it "
+                       "in --profile. Print the pattern first: "
                        "wideprint test-print nozzle-check|bidir-scan|heads-scan|feed-scan|"
-                       "wedge-scan.")
+                       "wedge-scan|banding-scan.")
     p.add_argument("kind", choices=tuple(KINDS))
     p.add_argument("--scan", metavar="SCAN.tif", help="the scan (TIFF)")
     p.add_argument("--values", action="append", metavar="INK=T0,...,T10",
@@ -36,6 +37,8 @@ def add_parser(sub) -> None:
                    help="the pattern's length along the sweep, as printed (default 100)")
     p.add_argument("--scan-dpi", type=float, metavar="N",
                    help="the scan's resolution (default: its TIFF resolution tags)")
+    p.add_argument("--passes", type=int, choices=setting("passes").choices,
+                   help="banding: the weave the chart was printed with (its periods reported)")
     p.add_argument("--profile", metavar="TOML", help="the profile the pattern was printed with; "
                    "--write updates it")
     p.add_argument("--write", action="store_true", help="store the result in --profile")

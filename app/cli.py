@@ -562,8 +562,9 @@ def cmd_test_print(args) -> int:
         faults = Faults.parse(args.inject)
         k = profile.k(args.dpi)
         width = int(round(args.width_mm / 25.4 * profile.counts_per_inch / k))
+        weave = dict(passes=args.passes, pass_mask=args.pass_mask, bidir=args.bidir)
         job = PatternJob.for_pattern(args.pattern, profile, width, args.dpi, head=args.head,
-                                     nozzle=args.nozzle)
+                                     nozzle=args.nozzle, **weave)
     except ValueError as exc:
         print(f"wideprint test-print: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -832,6 +833,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .calibrate_cli import add_parser as add_calibrate_parser
     add_calibrate_parser(sub)     # calibrate nozzles|bidir|heads|feed (docs/calibration.md)
 
+    from .quality_cli import add_parser as add_quality_parser
+    add_quality_parser(sub)       # quality SCAN.tif: banding, grain, mottle (docs/quality.md)
+
     p = sub.add_parser("devices", help="list the serial ports, USB printers and device nodes")
     p.set_defaults(func=cmd_devices)
 
@@ -849,6 +853,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dpi", type=int, choices=setting("dpi").choices, default=150,
                    help="resolution of the pattern (default 150, the thesis' test mode)")
     p.add_argument("--speed", type=float, metavar="MM_S", help="carriage speed (default: profile)")
+    p.add_argument("--passes", type=int, choices=setting("passes").choices, default=1,
+                   help="banding-scan: the weave's passes to print the chart with (default 1)")
+    p.add_argument("--pass-mask", choices=setting("pass_mask").choices,
+                   help="banding-scan: the pass mask (default: the RIP's)")
+    p.add_argument("--bidir", action="store_true", help="banding-scan: print on both strokes")
     p.add_argument("--thesis", action="store_true",
                    help="the thesis' test line (seed 000, docs/motion.md): 150 dpi, 24,000 "
                         "encoder counts (2,000 accelerating, 20,000 at 100 mm/s, 2,000 braking), "

@@ -45,6 +45,16 @@ KINDS = {
                        "drying clock (a long pause in a short test, docs/emulator.md)",
     "dry-nozzle": "HEAD:NOZZLE that has dried (misfires until spat or purged; repeatable)",
     "clogged-nozzle": "HEAD:NOZZLE that has clogged (misfires until purged; repeatable)",
+    "feed-noise": "random feed error: each feed travels a Gaussian error of this sigma further "
+                  "(4um, 0.05row; the fixed part is feed-error; docs/physical.md \"The machine\")",
+    "volume-spread": "per-nozzle drop volume spread, sigma (3%: each nozzle's drops 3 % larger or "
+                     "smaller, for the whole job; seeded)",
+    "direction-spread": "per-nozzle direction spread at the paper, sigma per axis (3um, or 3mrad "
+                        "of angle over the head gap; seeded)",
+    "head-density": "HEAD:+4%: this head's drops carry this much more ink (repeatable)",
+    "head-density-spread": "head-to-head drop volume spread, sigma (2%; seeded)",
+    "machine": "a whole machine's errors at once: perfect | typical | tired (docs/physical.md "
+               "\"The machine\"); explicit kinds override its values",
     "skew": "the paper travels at this angle to the feed axis (0.2deg; positive: the print runs "
             "to the right down the sheet; docs/physical.md)",
     "seed": "random seed for the injected faults and the scanner's noise",
@@ -53,6 +63,16 @@ KINDS = {
 }
 
 UNITS = ("um", "mm", "col", "row")
+
+#: the named machines of `--inject machine=` (docs/physical.md "The machine"): the errors a
+#: well-kept and a worn printer of this make show; each value as `--inject` would take it
+MACHINES: dict[str, dict[str, str]] = {
+    "perfect": {},
+    "typical": {"feed-noise": "3um", "volume-spread": "3%", "direction-spread": "3mrad",
+                "head-density-spread": "2%"},
+    "tired": {"feed-noise": "8um", "volume-spread": "8%", "direction-spread": "10mrad",
+              "head-density-spread": "5%"},
+}
 
 
 @dataclass(frozen=True)
@@ -86,6 +106,15 @@ def _xy(text: str) -> tuple[Length, Length]:
         else:
             raise ValueError(part)
     return dx, dy
+
+
+HEAD_GAP_MM = 1.0          # nozzle plate to paper (decision, docs/physical.md; physical.py)
+
+
+def _fraction(text: str) -> float:
+    """'3%' or '0.03' -> 0.03; '+4%' -> 0.04."""
+    t = text.strip()
+    return float(t[:-1]) / 100 if t.endswith("%") else float(t)
 
 
 @dataclass
@@ -126,15 +155,38 @@ class Faults:
     idle_time_scale: float = 1.0
     dry_nozzle: list = field(default_factory=list)       # [(head name, nozzle)]
     clogged_nozzle: list = field(default_factory=list)   # [(head name, nozzle)]
+    feed_noise: Length | None = None                     # sigma of the random feed error
+    volume_spread: float = 0.0                           # sigma, fraction of the drop volume
+    direction_spread: Length | None = None               # sigma per axis at the paper
+    head_density: list = field(default_factory=list)     # [(head name, fraction)]
+    head_density_spread: float = 0.0                     # sigma, fraction of the drop volume
+    machine: str = "perfect"
     skew: float = 0.0                                    # degrees (docs/physical.md)
     seed: int = 1
     boot: int | None = None                              # power-up number (None: random)
+
+    @property
+    def machine_errors(self) -> bool:
+        """Whether the machine's random errors (feed noise, nozzle and head spreads) are on."""
+        return bool(self.feed_noise is not None and self.feed_noise.value
+                    or self.volume_spread or self.direction_spread is not None
+                    and self.direction_spread.value or self.head_density
+                    or self.head_density_spread)
 
     @classmethod
     def parse(cls, items: list[str] | None) -> "Faults":
         f = cls()
         names = {fl.name: fl for fl in fields(cls)}
-        for item in items or []:
+        items = list(items or [])
+        machine = [i.split("=", 1)[1].strip() for i in items if i.split("=", 1)[0].strip() == "machine"]
+        if machine:
+            if machine[-1] not in MACHINES:
+                raise ValueError(f"--inject machine={machine[-1]}: bad value (one of "
+                                 f"{', '.join(MACHINES)})")
+            given = {i.split("=", 1)[0].strip() for i in items}
+            # the preset first, so that an explicit kind given with it wins
+            items = [f"{k}={v}" for k, v in MACHINES[machine[-1]].items() if k not in given] + items
+        for item in items:
             if "=" not in item:
                 raise ValueError(f"--inject {item!r}: expected KIND=VALUE; kinds: {', '.join(KINDS)}")
             kind, value = item.split("=", 1)
@@ -161,6 +213,29 @@ class Faults:
                         f.feed_error = Length.parse(value)
                         if f.feed_error.unit == "col":
                             raise ValueError(value)
+                elif attr == "machine":
+                    f.machine = value.strip()
+                elif attr == "feed_noise":
+                    f.feed_noise = Length.parse(value)
+                    if f.feed_noise.unit == "col" or f.feed_noise.value < 0:
+                        raise ValueError(value)
+                elif attr == "direction_spread":
+                    v = value.strip().lower()
+                    # an angle: the drop's offset over the head gap (physical.HEAD_GAP_MM)
+                    f.direction_spread = (Length(float(v[:-4]) * HEAD_GAP_MM) if v.endswith("mrad")
+                                          else Length.parse(v))
+                    if f.direction_spread.unit not in ("um", "mm") or f.direction_spread.value < 0:
+                        raise ValueError(value)
+                elif attr in ("volume_spread", "head_density_spread"):
+                    setattr(f, attr, _fraction(value))
+                    if not 0 <= getattr(f, attr) < 0.5:
+                        raise ValueError(value)
+                elif attr == "head_density":
+                    head, amount = value.split(":")
+                    frac = _fraction(amount)
+                    if not -0.5 < frac < 1:
+                        raise ValueError(value)
+                    f.head_density.append((head.strip(), frac))
                 elif attr == "skew":
                     f.skew = float(value.strip().lower().removesuffix("deg").removesuffix("°"))
                     if not abs(f.skew) <= 5:

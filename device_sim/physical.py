@@ -16,10 +16,9 @@ import numpy as np
 
 from ..driver import protocol as P
 from ..rip.profile import Profile
-from .faults import Faults, Length
+from .faults import HEAD_GAP_MM, Faults, Length
 from .vcd import DSTB_PRINT_HZ
 
-HEAD_GAP_MM = 1.0          # nozzle plate to paper (decision, docs/physical.md)
 DROP_SPEED_M_S = 6.0       # the XJ128's nominal drop velocity
 DOT_SPREAD = 2.4           # dot diameter on the paper / drop diameter in flight
 
@@ -108,6 +107,32 @@ class PhysicalModel:
         for _, nozzle, *_ in faults.misdirect:
             if not 0 <= nozzle < prof.nozzles:
                 raise ValueError(f"--inject misdirect: nozzle {nozzle} is not 0..{prof.nozzles - 1}")
+        for name, _ in faults.head_density:
+            if name not in names:
+                raise ValueError(f"--inject head-density: no head named {name!r} (heads: {', '.join(names)})")
+        self._machine()
+
+    # -- the machine's own errors (docs/physical.md "The machine") ---------------------------
+    def _machine(self) -> None:
+        """Draw the machine's fixed errors once, from the seed: each nozzle's direction
+        (x, y at the paper) and drop volume, each head's volume; and the feed's random
+        stream.  Each draw has its own stream, so adding one kind leaves the others'."""
+        f, seed = self.faults, int(self.faults.seed)
+        shape = (self.n_heads, self.nozzles)
+        sd = f.direction_spread.um(0.0, 0.0) if f.direction_spread is not None else 0.0
+        rng = np.random.default_rng([seed, 36, 1])
+        self.spread_dx_um = rng.normal(0.0, 1.0, shape) * sd
+        self.spread_dy_um = rng.normal(0.0, 1.0, shape) * sd
+        volume = 1.0 + np.random.default_rng([seed, 36, 2]).normal(0.0, 1.0, shape) * f.volume_spread
+        head = 1.0 + np.random.default_rng([seed, 36, 3]).normal(0.0, 1.0, self.n_heads) * f.head_density_spread
+        index = {h.name: h.index for h in self.profile.heads}
+        for name, frac in f.head_density:
+            head[index[name]] *= 1.0 + frac
+        # a dot's diameter grows as the cube root of its drop's volume (docs/physical.md)
+        self.volume = np.clip(volume * head[:, None], 0.05, None)
+        self.diameter_dev = self.volume ** (1.0 / 3.0) - 1.0
+        self.has_sizes = bool(np.any(self.diameter_dev != 0.0))
+        self._feed_rng = np.random.default_rng([seed, 36, 4])
 
     # -- per job -------------------------------------------------------------------------
     def job_geometry(self, x0: int, k: int, y0: int, row_nm: int, width: int,
@@ -122,7 +147,7 @@ class PhysicalModel:
         for name, dx, dy in f.head_offset:
             hdx[index[name]] += dx.um(col_um, row_um)
             hdy[index[name]] += dy.um(col_um, row_um)
-        ndx, ndy = np.zeros((self.n_heads, self.nozzles)), np.zeros((self.n_heads, self.nozzles))
+        ndx, ndy = self.spread_dx_um.copy(), self.spread_dy_um.copy()     # the machine's spread
         for name, nozzle, dx, dy in f.misdirect:
             ndx[index[name], nozzle] += dx.um(col_um, row_um)
             ndy[index[name], nozzle] += dy.um(col_um, row_um)
@@ -135,21 +160,26 @@ class PhysicalModel:
         extra = travel_um * f.feed_error_fraction
         if f.feed_error is not None and travel_um:
             extra += f.feed_error.um(0.0, row_um)
+        if f.feed_noise is not None and f.feed_noise.value and travel_um:
+            # the random part, new on every feed (the roller's runout, the stepper's step
+            # angle error, the media slipping on the grit): it accumulates, as on paper
+            extra += float(self._feed_rng.normal()) * f.feed_noise.um(0.0, row_um)
         return extra
 
     # -- the drops ------------------------------------------------------------------------
     def land(self, geo: JobGeometry, head: int, columns: np.ndarray, words: np.ndarray,
              forward: bool, velocity: np.ndarray, line_speed: float,
-             paper_um: float, delay_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+             paper_um: float, delay_s: float = 0.0, sizes: bool = False):
         """Positions (x µm, y µm) in the image frame of every drop of one head's fires:
         `columns` the trigger columns, `words` (fires, 8) what the nozzles latched (dead
         nozzles already cleared), `velocity` the carriage's signed speed at each fire
         (counts/s), `line_speed` the line's commanded speed, `paper_um` the paper's travel
         since JOB_BEGIN, `delay_s` the head's fire delay (FIRE_DELAY registers): the strobes
-        come that much later, the carriage has moved v t further."""
+        come that much later, the carriage has moved v t further.  With `sizes`, also each
+        drop's relative dot diameter error (None on a machine without volume errors)."""
         fire, z = np.nonzero(P.words_to_nozzles(words))
         if fire.size == 0:
-            return np.zeros(0), np.zeros(0)
+            return (np.zeros(0), np.zeros(0), None) if sizes else (np.zeros(0), np.zeros(0))
         h = self.profile.heads[head]
         s = 1.0 if forward else -1.0
         p = self.phase[z]
@@ -163,4 +193,6 @@ class PhysicalModel:
         y = (paper_um + (self.slots[head, z] + 0.5 - geo.y0) * geo.row_um
              + geo.static_dy_um(head)[z])
         x, y = geo.skewed(x, y)                     # the paper's own travel, not in the media
+        if sizes:
+            return x, y, (self.diameter_dev[head, z] if self.has_sizes else None)
         return x, y

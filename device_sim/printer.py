@@ -685,6 +685,7 @@ class Printer:
                                         paper_nm, shift)
         self.media.land_words(h.channel, words, columns, rows, dcol)
         if self.scanner is not None and velocity is not None:
-            x, y = self.physical.land(self.geometry, head, columns, words, forward, velocity,
-                                      line_speed, paper_nm / 1000, delay)
-            self.scanner.splat(h.channel, x, y)
+            x, y, size = self.physical.land(self.geometry, head, columns, words, forward,
+                                            velocity, line_speed, paper_nm / 1000, delay,
+                                            sizes=True)
+            self.scanner.splat(h.channel, x, y, size)

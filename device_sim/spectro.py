@@ -134,7 +134,9 @@ class Spectrophotometer:
         self._out = open(path, "r+b")
 
     # -- drops -----------------------------------------------------------------------------
-    def splat(self, channel: int, x_um: np.ndarray, y_um: np.ndarray) -> None:
+    def splat(self, channel: int, x_um: np.ndarray, y_um: np.ndarray, size=None) -> None:
+        # a drop is counted, not sized: drop volume spreads are the scanner's alone
+        # (docs/physical.md "The machine")
         if x_um.size == 0:
             return
         fx = np.floor(np.asarray(x_um) / self.fine).astype(np.int64)
@@ -218,9 +220,9 @@ class Instruments:
     def __getattr__(self, name):
         return getattr(self.scanner, name)
 
-    def splat(self, channel, x_um, y_um) -> None:
+    def splat(self, channel, x_um, y_um, size=None) -> None:
         for i in self.instruments:
-            i.splat(channel, x_um, y_um)
+            i.splat(channel, x_um, y_um, size)
 
     def flush_below(self, y_um: float) -> None:
         for i in self.instruments:

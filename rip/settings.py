@@ -24,7 +24,7 @@ from typing import Any, Callable, Iterable, Mapping
 METHODS = ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise")   # rip/halftone.py
 ORDERED = ("bayer", "bluenoise")                                 # screens, not diffusion
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)                                 # rip/swath.py weaves
-PASS_MASKS = ("checker", "random", "feather")                    # rip/swath.py
+PASS_MASKS = ("checker", "random", "feather", "shingle")         # rip/swath.py
 INTENTS = ("perceptual", "relative", "saturation", "absolute")   # rip/color.py (LittleCMS)
 SIZES = ("physical", "pixels")                                   # rip/place.py
 FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kernels
@@ -34,7 +34,7 @@ PAGE_BOXES = ("crop", "trim", "bleed", "art", "media")             # PDF page bo
 MARKS = ("none", "crop", "registration", "cut")                    # layout marks (docs/layout.md, cut.md)
 #: the test prints (rip/testprints.py); named here so that building the CLI parser stays light
 TEST_PATTERNS = ("line", "sawtooth", "nozzle-check", "bidir-align", "head-align", "bidir-scan",
-                 "heads-scan", "feed-scan", "wedge-scan")
+                 "heads-scan", "feed-scan", "wedge-scan", "banding-scan")
 
 #: largest placed image side, in device columns or rows (3.4 m at 600 dpi is 80,315 columns;
 #: 1,000,000 rows is 68.55 m of media)
@@ -143,7 +143,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("pass_mask", str, "checker", "which pass prints which dot (docs/geometry.md)",
             choices=PASS_MASKS, label="Pass mask",
             labels={"checker": "Checkerboard", "random": "Random (blue noise)",
-                    "feather": "Feathered edges"}),
+                    "feather": "Feathered edges", "shingle": "Shingled (raised cosine)"}),
     Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
             "with threshold modulation, the best for photographs; vector: the same with C and M, "
             "Y and K dots kept apart, the least grain in light mixed colours; dbs: vced's dots "

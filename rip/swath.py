@@ -13,7 +13,8 @@ The geometry is docs/geometry.md; in short, with N passes and A rows of paper ad
   (the row's pass j of the weave), at slot (r mod A) + (N - 1 - j) * A + s0;
 - the pass mask gives each dot one j (checker: (x + r) mod N; random: blue-noise ranks
   split evenly; feather: blue-noise ranks split by weights that fall off towards the ends
-  of the nozzle run, hiding stroke-boundary banding); a dot whose slot is a dead nozzle
+  of the nozzle run, hiding stroke-boundary banding; shingle: the same with raised-cosine
+  shares over a measured taper per pass count, `shingle_weights`); a dot whose slot is a dead nozzle
   moves to the next live j (nozzle-out compensation), so no dot is lost or doubled;
 - head h fires image column x at trigger column x - x_h / k (k = counts per column);
   reverse strokes fire in descending columns, shifted by the profile's bidir offset; the
@@ -33,8 +34,12 @@ from .planes import INK_SHIFT
 from .profile import COLORS, Profile, ProfileError
 
 from .settings import PASS_COUNTS, PASS_MASKS  # noqa: F401 - declared with the settings schema
-MASK_LEVELS = 256           # quantisation of the random / feather masks
+MASK_LEVELS = 256           # quantisation of the random / feather / shingle masks
 FEATHER = 0.25              # fraction of the nozzle run, at each end, that fades out
+#: shingle: the raised-cosine taper at each end of the nozzle run, in advances (A rows), per
+#: pass count; measured against the banding of the typical machine (docs/rip.md "Pass
+#: masks", bench/banding_bench.py)
+SHINGLE_TAPER = {2: 1.0, 3: 1.0, 4: 1.0, 6: 1.0, 8: 1.0}
 
 
 @dataclass
@@ -171,6 +176,8 @@ class StrokePlanner:
             u = (np.arange(MASK_LEVELS) + 0.5) / MASK_LEVELS
             if mask == "random" or n == 1:
                 weights = np.ones((a, n))
+            elif mask == "shingle":
+                weights = shingle_weights(n, a)
             else:
                 # position of each (row phase, j) slot in the used run, 0..1
                 rho = np.arange(a)[:, None]
@@ -300,6 +307,21 @@ class StrokePlanner:
         if direction == 1:
             words = words[:, ::-1]
         return StrokeData(i, direction, top, first, np.ascontiguousarray(words), dots)
+
+
+def shingle_weights(n: int, a: int, taper: float | None = None) -> np.ndarray:
+    """(A, N) each pass's share of the rows of phase r mod A (docs/rip.md "Pass masks"):
+    the nozzle run's share rises and falls as a raised cosine over `taper` advances at each
+    end (SHINGLE_TAPER), flat between, so a row's passes hand over smoothly from stroke to
+    stroke and a feed error's step is spread over the taper; rows normalised to 1."""
+    taper = SHINGLE_TAPER.get(n, 1.0) if taper is None else taper
+    t = max(taper * a, 1e-9)
+    rho = np.arange(a)[:, None]
+    j = np.arange(n)[None, :]
+    s = rho + (n - 1 - j) * a + 0.5                      # the slot in the used run, 0..N A
+    edge = np.minimum(s, n * a - s)                      # distance from the run's nearer end
+    w = np.where(edge < t, 0.5 - 0.5 * np.cos(np.pi * np.minimum(edge / t, 1.0)), 1.0)
+    return w / w.sum(axis=1, keepdims=True)
 
 
 def pack_dots(band: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -16,7 +16,7 @@ __all__ = ["CALIBRATION_KINDS", "TEST_PATTERNS", "pattern_of", "kind_of"]
 #: `calibrate KIND` -> the test print its scan is of
 CALIBRATION_KINDS: dict[str, str] = {
     "nozzles": "nozzle-check", "bidir": "bidir-scan", "heads": "heads-scan",
-    "feed": "feed-scan", "wedge": "wedge-scan"}
+    "feed": "feed-scan", "wedge": "wedge-scan", "banding": "banding-scan"}
 
 assert set(CALIBRATION_KINDS.values()) <= set(TEST_PATTERNS)
 

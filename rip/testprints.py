@@ -24,6 +24,11 @@ printed through the same planner and driver as any image.
                 the dpi mode's drop budget and the RIP's default halftone, between the
                 same K bars: `wideprint calibrate wedge` reads each step's tone
                 (docs/color.md "Linearisation")
+- banding-scan: the banding and grain chart (docs/quality.md): flat tints of each ink and
+                mixes (BANDING_TINTS) as strips along the feed, BANDING_LENGTH_MM long
+                (several swath periods at any pass count), between the same K bars, printed
+                with the job's passes, pass mask and direction: `wideprint quality` and
+                `wideprint calibrate banding` measure its scan
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ ALIGN_RANGE = 4          # candidate offsets -4 .. +4 columns
 ALIGN_BLOCK = 48         # columns per candidate block
 ALIGN_PITCH = 8          # columns between bars
 CHECK_STEPS = 8          # nozzle-check staircase: nozzle z prints at step z mod 8
+WEAVE_PATTERN = "banding-scan"   # the one pattern printed with the job's weave
 
 
 def align_offsets() -> list[int]:
@@ -106,11 +112,21 @@ FEED_STROKES = 4
 FEED_NOZZLES = tuple(range(8, 124, 20))               # K1 dashes in every stroke
 FEED_DASH_UM = 3000.0
 FEED_DASHES_X = 3                                     # dashes per nozzle row, along the sweep
-SCAN_PATTERNS = ("bidir-scan", "heads-scan", "feed-scan", "wedge-scan")
+SCAN_PATTERNS = ("bidir-scan", "heads-scan", "feed-scan", "wedge-scan", "banding-scan")
 WEDGE_STEPS = (0, 26, 51, 77, 102, 128, 153, 179, 204, 230, 255)   # 0, 10 %, ... 100 %
 WEDGE_STROKES = 2        # one pass: the wedge is two strokes tall (about 35 mm)
 WEDGE_GAP_UM = 1000.0    # paper between patches
 WEDGE_DITHER = "vced"    # the RIP's default halftone
+#: the banding and grain chart's tints (docs/quality.md "The chart"): name, C M Y K amounts
+#: 0..255.  Light and middle tints of each ink (grain shows in the light ones, banding in
+#: the middle ones) and the three two-ink mixes and a three-ink grey
+BANDING_TINTS: tuple[tuple[str, tuple[int, int, int, int]], ...] = (
+    ("C25", (64, 0, 0, 0)), ("C50", (128, 0, 0, 0)), ("M25", (0, 64, 0, 0)),
+    ("M50", (0, 128, 0, 0)), ("Y50", (0, 0, 128, 0)), ("K25", (0, 0, 0, 64)),
+    ("K50", (0, 0, 0, 128)), ("C30M30", (77, 77, 0, 0)), ("M40Y40", (0, 102, 102, 0)),
+    ("C25M25Y25", (64, 64, 64, 0)))
+BANDING_LENGTH_MM = 64.0     # along the feed: 3.7 swaths at 4 passes, 15 feeds
+BANDING_GAP_UM = 1000.0      # paper between strips
 
 
 @dataclass(frozen=True)
@@ -165,6 +181,8 @@ def scan_layout(kind: str, profile: Profile, width: int, dpi: int = 150) -> Scan
         return ScanLayout(kind, planes, bars, tuple(marks), a)
     if kind == "wedge-scan":
         return _wedge_layout(profile, width, dpi)
+    if kind == "banding-scan":
+        return _banding_layout(profile, width, dpi)
     if kind not in SCAN_PATTERNS:
         raise ValueError(f"not a scan pattern: {kind!r} (one of nozzle-check, {', '.join(SCAN_PATTERNS)})")
     col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
@@ -265,6 +283,40 @@ def _wedge_layout(profile: Profile, width: int, dpi: int) -> ScanLayout:
     return ScanLayout("wedge-scan", planes, tuple(bars), tuple(marks), s1 - s0)
 
 
+def _banding_layout(profile: Profile, width: int, dpi: int) -> ScanLayout:
+    """The banding and grain chart (docs/quality.md "The chart"): one strip along the feed
+    per BANDING_TINTS entry, the whole length, through the profile's curves and drop budget
+    and the RIP's default halftone; K bars over the whole length at both ends.  Mark.head
+    holds the tint's name, Mark.nozzle its index."""
+    from .halftone import Halftoner
+    from .pipeline import profile_curves
+    rows = int(round(BANDING_LENGTH_MM * 1000.0 / profile.row_um))
+    col_um = profile.k(dpi) * 25_400.0 / profile.counts_per_inch
+    bar, gap = _cols(BAR_UM, col_um), _cols(BAR_GAP_UM, col_um)
+    inner0, inner1 = bar + gap, width - bar - gap
+    pitch = (inner1 - inner0) // len(BANDING_TINTS)
+    pgap = _cols(BANDING_GAP_UM, col_um)
+    if pitch < 4 * pgap:
+        raise ValueError(f"banding-scan needs at least "
+                         f"{(2 * (BAR_UM + BAR_GAP_UM) + len(BANDING_TINTS) * 4 * BANDING_GAP_UM) / 1000:.0f} mm")
+    lut = profile_curves(profile, dpi)
+    amounts = np.zeros((rows, width, 4), np.uint8)
+    strips: list[Mark] = []
+    for i, (name, cmyk) in enumerate(BANDING_TINTS):
+        c0 = inner0 + i * pitch + pgap // 2
+        c1 = c0 + pitch - pgap
+        for ch, v in enumerate(cmyk):
+            if v:
+                amounts[:, c0:c1, ch] = v if lut is None else np.rint(lut[ch, v])
+        strips.append(Mark("patch", name, int(np.argmax(cmyk)), 0, i, 0, rows, c0, c1))
+    planes = Halftoner(WEDGE_DITHER, width).process(amounts)
+    frame = (Mark("bar", "K", 3, 0, 0, 0, rows, 0, bar), Mark("bar", "K", 3, 0, 0, 0, rows, width - bar, width))
+    for m in frame:
+        planes[:, m.c0:m.c1, 3] = 1
+    s0, s1 = profile.usable_slots()
+    return ScanLayout("banding-scan", planes, frame, tuple(strips), s1 - s0)
+
+
 def make_pattern(kind: str, profile: Profile, width: int, head: str = "K1",
                  nozzle: int = 64, dpi: int = 150) -> np.ndarray:
     """The pattern as planes (rows, width, 4) uint8 0/1 on the device grid, for 1 pass."""
@@ -347,9 +399,20 @@ class PatternJob(PrintableJob):
 
     @classmethod
     def for_pattern(cls, kind: str, profile: Profile, width: int, dpi: int = 150,
+                    passes: int = 1, pass_mask: str | None = None, bidir: bool = False,
                     **kw) -> "PatternJob":
-        """The pattern with the pass settings it needs (bidir-align prints bidirectionally)."""
+        """The pattern with the pass settings it needs (bidir-align prints bidirectionally);
+        the banding chart is printed the way a job would be: `passes`, `pass_mask`, `bidir`
+        (the other patterns are one pass: their marks are placed per stroke)."""
         planes = make_pattern(kind, profile, width, dpi=dpi, **kw)
+        if kind == WEAVE_PATTERN:
+            weave = RipSettings(dpi=dpi, passes=passes, bidir=bidir)
+            if pass_mask is not None:
+                weave = dataclasses.replace(weave, pass_mask=pass_mask)
+            return cls(kind, planes, weave, profile)
+        if passes != 1 or pass_mask is not None or bidir:
+            raise ValueError(f"{kind} prints in one pass as it is drawn; passes, pass masks and "
+                             f"bidirectional printing are for {WEAVE_PATTERN}")
         return cls(kind, planes, RipSettings(dpi=dpi, passes=1,
                                              bidir=kind in ("bidir-align", "bidir-scan")),
                    profile)

@@ -221,6 +221,12 @@ SLOW: dict[str, set[str] | str] = {
     "test_place.py": {
         "test_tall_image_memory_is_bounded",  # 8.6
     },
+    "test_quality.py": {
+        "test_a_known_feed_error_is_banding_of_its_period_and_amplitude",  # 11.4
+        "test_the_report_runs_on_the_typical_and_tired_machines_scans",  # 18.6
+        "test_the_shingle_mask_is_tone_exact_and_deterministic",  # 3.3
+        "test_masks_print_bit_exact_on_the_perfect_printer",  # 1.5
+    },
     "test_planes_format.py": {
         "test_numba_starts_without_scipy_linalg",  # 0.8
     },
