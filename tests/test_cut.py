@@ -455,3 +455,21 @@ def test_pages_follow_each_other_with_their_cut_paths(tmp_path):
                  for p in job.paths)
     assert n - 1 == 2 and len(cut) == 2
     assert np.abs(np.subtract(cut, printed)).max() <= col + 0.01, (cut, printed)
+
+
+def test_skew_turns_the_print_on_the_scan_and_leaves_the_media(tmp_path):
+    """`--inject skew=1deg`: on the scan the print is turned by 1 degree, running to the
+    right down the sheet (docs/physical.md "Skew"); the bit-exact media is the RIP's
+    planes, as without skew."""
+    pdf = tmp_path / "block.pdf"
+    make_pdf(pdf, 120, 200, "0 0 0 1 k 10 10 100 180 re f\n")
+    run = wideprint("print", str(pdf), "--dpi", "150", "--media-out", str(tmp_path / "media.tif"),
+                    "--scan-out", str(tmp_path / "scan.tif"), "--scan-dpi", "200", "--inject", "skew=1deg")
+    assert run.returncode == 0, run.stderr
+    assert np.array_equal(api.read_planes(tmp_path / "media.tif"), api.rip(pdf, {"dpi": 150}))
+    dark, _ = cutter.load_scan(str(tmp_path / "scan.tif"))
+    rows = np.nonzero((dark > 0.5).sum(axis=1) > 50)[0]
+    top, bottom = rows[5], rows[-6]                      # inside the block's height
+    left = [np.argmax(dark[r] > 0.5) for r in range(top, bottom)]
+    slope = np.degrees(np.arctan(np.polyfit(np.arange(top, bottom), left, 1)[0]))
+    assert abs(slope - 1.0) < 0.05, slope               # the left edge runs right going down

@@ -179,6 +179,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_rotated_page_and_eps_go_through_ghostscript_as_printed",  # 22 (loaded machine)
         "test_layouts_carry_their_items_cut_paths_and_marks",  # 4.9
         "test_pages_follow_each_other_with_their_cut_paths",  # 5.4
+        "test_skew_turns_the_print_on_the_scan_and_leaves_the_media",  # 15
     },
     "test_layout.py": {
         "test_cli_nests_different_images_in_one_job_and_reports_the_media_saved",  # 1.0
