@@ -386,8 +386,8 @@ def test_rotated_page_and_eps_go_through_ghostscript_as_printed(tmp_path):
 
 
 def test_layouts_carry_their_items_cut_paths_and_marks(tmp_path):
-    """Step-and-repeat: every copy has its path and its marks, at its slot; tiles cut only
-    what lies on them."""
+    """Step-and-repeat: every copy has its path and its marks, at its slot; nested items
+    turned 90 degrees carry their turned paths; tiles cut only what lies on them."""
     from wideprint.rip.cut import cut_job
     from wideprint.rip.layout import plan_layout
     pdf = tmp_path / "label.pdf"
@@ -403,6 +403,18 @@ def test_layouts_carry_their_items_cut_paths_and_marks(tmp_path):
     for s, p in zip(plan.slots, job.paths):
         shift = np.array([g.mm_x(s.x - plan.slots[0].x), g.mm_y(s.y - plan.slots[0].y)])
         assert np.abs(p.points - (alone.paths[0].points + shift)).max() < 1e-9
+    # nesting with turns: a turned item's path is the file's printed alone at rotate 90, at its slot
+    wide, small = tmp_path / "wide.pdf", tmp_path / "small.pdf"
+    make_pdf(wide, 300 / PT, 60 / PT, "/CS0 CS 1 SCN 0.5 w 20 20 100 60 re S\n")
+    make_pdf(small, 50 / PT, 40 / PT, "/CS0 CS 1 SCN 0.5 w 10 10 50 40 re S\n")
+    nest = settings_for(dpi=150, nest=True, nest_rotate=True, nest_width_mm=200, marks="cut")
+    nplan = plan_layout([str(wide), str(small)], nest, prof)
+    njob = cut_job([str(wide), str(small)], nest, prof, plan=nplan)
+    assert len(njob.paths) == 2 and len(njob.marks) == 8 and all(s.item.turn for s in nplan.slots)
+    ng = nplan.grid
+    for s, p in zip(nplan.slots, njob.paths):
+        ref = cut_job(s.item.path, settings_for(dpi=150, rotate=90), prof).paths[0].points
+        assert np.abs(p.points - (ref + [ng.mm_x(s.x), ng.mm_y(s.y)])).max() < 1e-9
     tiles = settings_for(tile_width_mm=20)
     tplan = plan_layout([str(pdf)], tiles, prof)
     tjob = cut_job([str(pdf)], tiles, prof, plan=tplan)
