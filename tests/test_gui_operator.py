@@ -303,3 +303,162 @@ def test_a_printing_card_shows_the_time_left(qtbot, monkeypatch):
     card.show_info(info(10))
     assert card.progress.format() == "20 % · 3:00 left", card.progress.format()
     assert "left" in card.progress.toolTip()
+
+
+# -- look before printing, reprint, fit, rolls and costs (issue 34 parts 2-5) -----------------
+import numpy as np  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def shop(tmp_path_factory):
+    """One paused server for the tests below (a server's start and stop cost ~20 s); each
+    test leaves it as it found it: paused, no roll, nothing waiting."""
+    s = Server(tmp_path_factory.mktemp("shop"), "--paused")
+    yield s
+    s.stop()
+
+
+@pytest.fixture
+def shop_win(qtbot, shop, tmp_path):
+    w = open_window(qtbot, shop, tmp_path / "cfg")
+    yield w
+    w.link.stop()
+    c = shop.client
+    c.pause_queue(True)
+    for j in c.jobs("queued,held,printing"):
+        c.cancel(j["id"])
+    c.roll("main", {"unload": True})
+PRICES = {"currency": "EUR", "ink_per_ml": {"c": 0.2, "m": 0.2, "y": 0.2, "k": 0.1},
+          "media_per_m2": {"default": 3.0}, "machine_per_hour": 40.0}
+
+
+def test_hold_then_release_after_the_estimate_and_its_quote(qtbot, shop_win, shop, tmp_path):
+    """Added as held, the job waits with the queue running; its estimate shows the quote at
+    the shop's price list; released, it prints bit-exact."""
+    from wideprint.rip.planes import read_planes
+    shop.client.prices(PRICES)
+    shop.client.pause_queue(False)
+    a, planes = image(tmp_path, "look-first.tif", 70, rows=200, cols=240)
+    shop_win.add_held.setChecked(True)
+    shop_win.add_files([a])
+    qtbot.waitUntil(lambda: shop_win.queue_view.selected_ids() != [], timeout=20_000)
+    job = job_named(shop_win, "look-first.tif")
+    assert job["state"] == "held"
+    cost = shop_win.estimate.all["cost"]
+    qtbot.waitUntil(lambda: cost.text() != "–", timeout=20_000)
+    quote = shop.client.preview(job["id"], 900)["quote"]
+    assert cost.text() == f"{quote['total']:,.2f} EUR" and quote["total"] > 0
+    assert shop_win.estimate.fit.text() == ""                              # it fits: no warning
+    qtbot.wait(1000)
+    assert shop.client.job(job["id"])["state"] == "held"            # the queue runs: it waits
+    shop_win.actions_["release"].trigger()
+    qtbot.waitUntil(lambda: shop.client.job(job["id"])["state"] == "done", timeout=LONG)
+    assert np.array_equal(read_planes(shop.media / f"job-{job['id']}.tif"), planes)
+
+
+def test_a_job_too_wide_is_refused_naming_the_file_flagged_and_fitted_with_a_click(
+        qtbot, shop_win, shop, tmp_path):
+    a, _ = image(tmp_path, "banner.tif", 71, rows=40, cols=60)
+    wide = {"placement": {"width_mm": 5080, "height_mm": 1000}}
+    shop_win.gs.job = dict(wide)
+    shop_win.add_files([a])
+    qtbot.waitUntil(lambda: "banner.tif" in shop_win.statusBar().currentMessage(), timeout=20_000)
+    msg = shop_win.statusBar().currentMessage()
+    assert "banner.tif is 5,080 mm wide" in msg and "spool" not in msg
+    assert [j for j in shop.client.jobs() if j["name"] == "banner.tif"] == []   # refused
+    # forced and held: the estimate flags it and offers what makes it fit
+    job = shop.client.submit(a, settings=wide, force=True, hold=True)["job"]
+    qtbot.waitUntil(lambda: len(shop_win.queue_model.jobs) == 1, timeout=20_000)
+    select(shop_win, ["banner.tif"])
+    qtbot.waitUntil(lambda: "Does not fit" in shop_win.estimate.fit.text(), timeout=20_000)
+    assert "5,080 mm wide" in shop_win.estimate.fit.text()
+    rotate = shop_win.estimate.offer_buttons["rotate"]
+    assert rotate.isVisible() and shop_win.estimate.offer_buttons["fit-to-width"].isVisible()
+    rotate.click()
+    qtbot.waitUntil(lambda: shop.client.job(job["id"])["settings"]["placement"].get("rotate")
+                    == 90, timeout=10_000)
+    assert shop.client.fit(job["id"])["fits"]
+    qtbot.waitUntil(lambda: shop_win.estimate.fit.text() == "", timeout=20_000)
+
+
+def test_a_failed_job_is_billed_only_what_it_printed(qtbot, shop_win, shop, tmp_path):
+    """Forced onto paper too narrow, it fails at the printer with 0 strokes: the history's
+    accounting says 0 area and no media cost, and names the file, not the spool copy."""
+    shop.client.prices(PRICES)
+    a, _ = image(tmp_path, "too-wide.tif", 72, rows=40, cols=60)
+    job = shop.client.submit(a, settings={"placement": {"width_mm": 5080}}, force=True)["job"]
+    shop.client.pause_queue(False)
+    qtbot.waitUntil(lambda: "too-wide.tif" in names_in(shop_win.history_view), timeout=LONG)
+    shop_win.tabs.setCurrentIndex(1)
+    shop_win.history_view.select_ids([job["id"]])
+    shop_win._show_selection()
+    qtbot.waitUntil(lambda: shop_win.estimate.title() == "Accounting"
+                    and shop_win.estimate.all["area"].text() != "–", timeout=20_000)
+    assert shop_win.estimate.all["area"].text() == "0.0 cm²"
+    assert shop_win.estimate.all["strokes"].text().startswith("0 / ")
+    rows = shop.client.report_costs(job["id"])["prints"]
+    assert rows[0]["cost"]["media"] == 0 and rows[0]["area_m2"] == 0
+    assert shop_win.estimate.all["cost"].text() == f"{rows[0]['cost']['total']:,.2f} EUR"
+    assert shop_win.estimate.note.text().startswith("failed: too-wide.tif")
+
+
+def test_reprint_from_the_history_is_bit_exact_and_its_preview_has_true_rulers(
+        qtbot, shop_win, shop, tmp_path):
+    from wideprint.rip.planes import read_planes
+    a, planes = image(tmp_path, "poster.tif", 73, rows=300, cols=400)
+    first = shop.client.submit(a)["job"]
+    shop.client.pause_queue(False)
+    qtbot.waitUntil(lambda: "poster.tif" in names_in(shop_win.history_view), timeout=LONG)
+    a.unlink()                                     # the archive has it
+    shop_win.tabs.setCurrentIndex(1)
+    shop_win.history_view.select_ids([first["id"]])
+    shop_win._show_selection()
+    info = shop.client.preview(first["id"], 900)
+    qtbot.waitUntil(lambda: shop_win.preview.has_image, timeout=20_000)
+    # the rulers read the print's millimetres, not the thumbnail's pixels
+    assert shop_win.preview.image_mm == pytest.approx((info["width_mm"], info["height_mm"]))
+    assert info["width_mm"] == pytest.approx(400 / 300 * 25.4, rel=0.01)
+    shop_win.add_held.setChecked(False)
+    shop_win.actions_["reprint"].trigger()
+    qtbot.waitUntil(lambda: len([j for j in shop.client.jobs() if j["name"] == "poster.tif"]) == 2,
+                    timeout=20_000)
+    again = max((j for j in shop.client.jobs() if j["name"] == "poster.tif"), key=lambda j: j["id"])
+    assert again["reprint_of"] == first["id"]
+    qtbot.waitUntil(lambda: shop.client.job(again["id"])["state"] == "done", timeout=LONG)
+    media = shop.media
+    assert np.array_equal(read_planes(media / f"job-{again['id']}.tif"),
+                          read_planes(media / f"job-{first['id']}.tif"))
+    assert np.array_equal(read_planes(media / f"job-{again['id']}.tif"), planes)
+
+
+def test_the_roll_on_the_card_and_a_job_it_cannot_hold_is_held(qtbot, shop_win, shop, tmp_path):
+    """Loaded from the GUI, the roll shows on the printer's card; a job longer than what is
+    left is held before its first stroke, with the reason in its row."""
+    from wideprint.app.gui.rolls import RollDialog
+    dlg = RollDialog("main", None, shop.state, shop_win)
+    assert "vinyl-300" in [dlg.media.itemText(i) for i in range(dlg.media.count())]
+    dlg.media.setCurrentText("vinyl-300")
+    dlg.length.setValue(12.5)
+    shop_win.load_roll("main", dlg.body())
+    card = shop_win.printers_panel.cards["main"]
+    qtbot.waitUntil(lambda: "vinyl-300, 12.50 m left" in card.telemetry.text(), timeout=20_000)
+    a, _ = image(tmp_path, "long-banner.tif", 74, rows=300, cols=100)
+    job = shop.client.submit(a)["job"]                # fits the roll at submission
+    shop_win.load_roll("main", {"remaining_m": 0.02})        # measured: 20 mm left
+    qtbot.waitUntil(lambda: shop.client.roll("main")["roll"]["remaining_m"] == 0.02,
+                    timeout=10_000)
+    shop.client.pause_queue(False)
+    qtbot.waitUntil(lambda: shop.client.job(job["id"])["state"] == "held", timeout=LONG)
+    j = shop.client.job(job["id"])
+    assert j["strokes_done"] == 0 and "needs" in j["message"] and "0.02 m left" in j["message"]
+    assert shop.client.report(job["id"]) == []
+    assert not (shop.media / f"job-{job['id']}.tif").exists()
+    qtbot.waitUntil(lambda: any(j["id"] == job["id"] and j["state"] == "held"
+                                for j in shop_win.queue_model.jobs), timeout=20_000)
+    row = shop_win.queue_model.row_of(job["id"])
+    tip = [shop_win.queue_model.data(shop_win.queue_model.index(row, c), Qt.ToolTipRole)
+           for c in range(shop_win.queue_model.columnCount())]
+    shown = " ".join(str(t) for t in tip if t) + " ".join(
+        str(shop_win.queue_model.data(shop_win.queue_model.index(row, c)))
+        for c in range(shop_win.queue_model.columnCount()))
+    assert "needs" in shown, shown

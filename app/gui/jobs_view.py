@@ -26,6 +26,8 @@ def state_text(job: dict) -> str:
         return f"nested on job {job['nested_in']}"
     if st == "held" and job.get("fault"):
         return "stopped: printer fault"
+    if st == "held" and "held before printing" in (job.get("message") or ""):
+        return "held: roll too short"          # the worker's roll check (docs/server.md "Rolls")
     if st == "queued" and job.get("interrupted"):
         return "queued, part-way"
     if st == "printing" and job.get("copies", 1) > 1:

@@ -15,11 +15,12 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QByteArray, QTimer, Qt
+from PySide6.QtCore import QByteArray, QTimer, Qt, Signal
 from PySide6.QtGui import QAction, QImage, QKeySequence
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QGridLayout, QGroupBox, QLabel,
-                               QMainWindow, QMenu, QMessageBox, QScrollArea, QSizePolicy, QSplitter, QStyle,
-                               QTabWidget, QToolButton, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QGridLayout, QGroupBox,
+                               QHBoxLayout, QLabel, QMainWindow, QMenu, QMessageBox, QPushButton,
+                               QScrollArea, QSizePolicy, QSplitter, QStyle, QTabWidget,
+                               QToolButton, QVBoxLayout, QWidget)
 
 from ... import __version__
 from ..estimate import fmt_duration, fmt_ml
@@ -69,6 +70,10 @@ def _shown(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def _money(v: float, currency: str) -> str:
+    return f"{v:,.2f} {currency}"
+
+
 def _m2(a: float) -> str:
     return f"{a:.3f} m²" if a >= 0.1 else f"{a * 1e4:.1f} cm²"
 
@@ -78,7 +83,8 @@ class EstimateBox(QGroupBox):
     finished job's accounting (what it really took)."""
 
     ROWS = (("size", "Size"), ("strokes", "Strokes"), ("time", "Time"), ("area", "Area"),
-            ("ink", "Ink"), ("cmyk", "C / M / Y / K"))
+            ("ink", "Ink"), ("cmyk", "C / M / Y / K"), ("cost", "Cost"))
+    offer = Signal(dict)              # the settings change of a fit offer, for the job shown
 
     def __init__(self, parent=None):
         super().__init__("Estimate", parent)
@@ -107,12 +113,50 @@ class EstimateBox(QGroupBox):
         self.note.setAlignment(Qt.AlignTop | Qt.AlignLeft)
         self.note.setFixedHeight(2 * self.note.fontMetrics().lineSpacing() + 4)
         g.addWidget(self.note, len(self.ROWS) + 1, 0, 1, 3)
+        # a job that does not fit the paper loaded (docs/server.md "Fit before it fails"):
+        # the problem, and the offers that make it fit, one click each
+        fit = QHBoxLayout()
+        self.fit = QLabel("")
+        self.fit.setObjectName("est_fit")
+        self.fit.setWordWrap(True)
+        self.fit.setStyleSheet("color: #c62828;")
+        self.fit.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
+        fit.addWidget(self.fit, 1)
+        self.offer_buttons: dict[str, QPushButton] = {}
+        for kind, text in (("fit-to-width", "Fit to width"), ("rotate", "Rotate 90°")):
+            b = QPushButton(text)
+            b.setObjectName(f"est_offer_{kind}")
+            b.hide()
+            b.clicked.connect(lambda _=False, _k=kind: self._offer_clicked(_k))
+            fit.addWidget(b)
+            self.offer_buttons[kind] = b
+        g.addLayout(fit, len(self.ROWS) + 2, 0, 1, 3)
+        self.offers: dict[str, dict] = {}
+
+    def _offer_clicked(self, kind: str) -> None:
+        if kind in self.offers:
+            self.offer.emit(self.offers[kind])
+
+    def show_fit(self, fit: dict | None) -> None:
+        """The fit of a waiting job: nothing when it fits, else the problems and offers."""
+        self.offers = {}
+        if not fit or fit.get("fits", True):
+            self.fit.setText("")
+        else:
+            self.fit.setText("Does not fit: " + "; ".join(short_paths(p) for p in fit["problems"]))
+            self.offers = {o["kind"]: o for o in fit.get("offers", [])}
+        for kind, b in self.offer_buttons.items():
+            o = self.offers.get(kind)
+            b.setVisible(o is not None)
+            if o is not None:
+                b.setToolTip(f"prints {o['width_mm']:,.0f} × {o['height_mm']:,.0f} mm")
 
     def clear(self, note: str = "") -> None:
         for v in list(self.one.values()) + list(self.all.values()):
             v.setText("–")
         self.head_all.setText("all copies")
         self.note.setText(note)
+        self.show_fit(None)
 
     def show_estimate(self, e: dict, note: str = "") -> None:
         self.shown = e
@@ -128,6 +172,14 @@ class EstimateBox(QGroupBox):
             d["area"].setText(_m2(part["area_m2"]))
             d["ink"].setText(f"{fmt_ml(part['ink_total_ml'])} ml")
             d["cmyk"].setText(" / ".join(fmt_ml(x) for x in part["ink_ml"]))
+        q = e.get("quote")                     # the estimate at the server's price list
+        if q:
+            self.one["cost"].setText(_money(q["total"] / max(1, n), q["currency"]))
+            self.all["cost"].setText(_money(q["total"], q["currency"]))
+            self.all["cost"].setToolTip(f"ink {q['ink']:.2f} + media {q['media']:.2f} "
+                                        f"({q.get('media_name') or 'default media'}) + machine "
+                                        f"time {q['time']:.2f} {q['currency']}")
+        self.show_fit(e.get("fit"))
         gamut = e.get("out_of_gamut")
         self.note.setText(note or (f"{e['source']}; {e['width_dots']:,} × {e['height_rows']:,} dots at "
                                    f"{e['dpi']} dpi; ink from the preview's halftone"
@@ -135,7 +187,9 @@ class EstimateBox(QGroupBox):
                                       if gamut is not None else "")))
 
     def show_accounting(self, job: dict, prints: list[dict]) -> None:
-        """What a finished job took (the server's accounting, one row per copy printed)."""
+        """What a finished job took (the server's accounting, one row per copy printed;
+        with their costs when the rows carry them: GET /v1/report?costs=1)."""
+        self.show_fit(None)
         self.setTitle("Accounting")
         self.head_one.setText("first copy")
         self.head_all.setText(f"all {len(prints)} printed" if prints else "nothing printed")
@@ -152,6 +206,9 @@ class EstimateBox(QGroupBox):
                 d["area"].setText(_m2(sum(r["area_m2"] for r in rows)))
                 d["ink"].setText(f"{fmt_ml(sum(ink))} ml")
                 d["cmyk"].setText(" / ".join(fmt_ml(x) for x in ink))
+                if all("cost" in r for r in rows):
+                    d["cost"].setText(_money(sum(r["cost"]["total"] for r in rows),
+                                             rows[0]["cost"]["currency"]))
         msg = job.get("message") or ""
         self.note.setText(f"{job['state']}" + (f": {short_paths(msg)}" if msg else ""))
 
@@ -233,6 +290,9 @@ class MainWindow(QMainWindow):
         self._action("release", "Release", lambda: self._each("release"), "Ctrl+R", S.SP_MediaPlay)
         self._action("requeue", "Requeue", lambda: self._each("requeue"), None, S.SP_BrowserReload,
                      "Print the selected failed or cancelled jobs again (History)")
+        self._action("reprint", "Reprint", self.reprint_selected, "Ctrl+P", S.SP_FileDialogNewFolder,
+                     "Print the selected finished jobs again from the archive, as new jobs with "
+                     "their settings (held when “as held” is ticked: change them, then release)")
         self._action("cancel", "Cancel", self.cancel_selected, QKeySequence.Delete, S.SP_DialogCancelButton)
         self._action("up", "Priority up", lambda: self._priority(+1), "Ctrl+Up", S.SP_ArrowUp,
                      "Print the selected jobs sooner")
@@ -255,7 +315,8 @@ class MainWindow(QMainWindow):
         a = self.actions_
         for title, keys in (("&File", ("add", None, "quit")),
                             ("&Edit", ("undo",)),
-                            ("&Jobs", ("hold", "release", "cancel", "requeue", None, "up", "down")),
+                            ("&Jobs", ("hold", "release", "cancel", "requeue", "reprint", None,
+                                       "up", "down")),
                             ("&Printers", ("pause_all", "resume_all", None, "estop"))):
             m = mb.addMenu(title)
             m.setObjectName(f"menu_{title.strip('&').lower()}")
@@ -288,7 +349,7 @@ class MainWindow(QMainWindow):
         self.add_held.toggled.connect(self._add_held_toggled)
         tb.addWidget(self.add_held)
         tb.addSeparator()
-        for k in ("hold", "release", "cancel", "requeue"):
+        for k in ("hold", "release", "cancel", "requeue", "reprint"):
             tb.addAction(self.actions_[k])
         tb.addSeparator()
         tb.addAction(self.actions_["up"])
@@ -355,6 +416,7 @@ class MainWindow(QMainWindow):
         self.preview.proof.toggled.connect(self._proof_toggled)
         ml.addWidget(self.preview, 1)
         self.estimate = EstimateBox()
+        self.estimate.offer.connect(self.apply_fit_offer)
         ml.addWidget(self.estimate)
         self.form = SettingsForm()
         self.form.edited.connect(self.setting_edited)
@@ -601,9 +663,9 @@ class MainWindow(QMainWindow):
             return
         self._shown_key = key
         if history:
-            self.link.call(lambda c, _id=j["id"]: c.report(_id),
+            self.link.call(lambda c, _id=j["id"]: c.report_costs(_id)["prints"],
                            lambda prints, _j=j: self.estimate.show_accounting(_j, prints))
-            self.link.call(lambda c, _id=j["id"]: (None, c.preview_png(_id)),
+            self.link.call(lambda c, _id=j["id"]: self._history_preview(c, _id),
                            lambda r, _k=key, _j=j: self._preview_done(_k, _j, r),
                            lambda msg, _k=key: self._preview_failed(_k, msg))
         else:
@@ -619,18 +681,42 @@ class MainWindow(QMainWindow):
         self._shown_key = None
         self._show_selection()
 
+    @staticmethod
+    def _history_preview(c, job_id: int):
+        """A finished job's preview: its archived file's, at its true size in mm; once the
+        archive let it go, the kept thumbnail with the size its accounting says (a done
+        copy's area is the whole image: width from its dots and dpi, length from the
+        area), or (None, png) when nothing says."""
+        from ..client import ApiError
+        try:
+            return dict(c.preview(job_id, PREVIEW_PX), history=True), c.preview_png(job_id, PREVIEW_PX)
+        except ApiError as exc:
+            if exc.status != 410:
+                raise
+        png = c.preview_png(job_id)
+        for r in c.report(job_id):
+            if r["outcome"] == "done" and r["width_dots"] and r["area_m2"]:
+                import json as _json
+                dpi = _json.loads(r["settings"]).get("dpi", 300)
+                w = r["width_dots"] * 25.4 / dpi
+                return dict(width_mm=w, height_mm=r["area_m2"] * 1e6 / w, history=True), png
+        return None, png
+
     def _preview_done(self, key, job: dict, result) -> None:
         if key != self._shown_key:
             return
         info, png = result
-        if info is not None:
+        if info is not None and not info.get("history"):
             self.estimate.show_estimate(info)
         rgb = _rgb_of_png(png)
         if rgb is None:
             return
-        if info is None:              # history: the kept thumbnail, at its own aspect
-            h, w = rgb.shape[:2]
-            info = dict(width_mm=w, height_mm=h)
+        if info is None:
+            # neither the file nor a done copy tells its size: the picture, no false rulers
+            self.preview.show_message(f"Job {job['id']}: {safe(job['name'])} — its file is no "
+                                      f"longer archived and no copy printed whole: no preview "
+                                      f"in millimetres")
+            return
         self.preview.set_image(rgb, info["width_mm"], info["height_mm"],
                                f"Job {job['id']}: {safe(job['name'])}")
         self._show_cut(key, job)
@@ -806,6 +892,52 @@ class MainWindow(QMainWindow):
             self.link.call(lambda c, _id=j["id"]: c.action(_id, "cancel"))
             log.info("job %s %s: cancel asked by the operator", j["id"], safe(j["name"]))
 
+    def reprint_selected(self) -> None:
+        """The selected finished jobs printed again from the archive (POST /v1/jobs/ID/reprint):
+        new jobs with their settings, held when "as held" is ticked (then change what should
+        change and release), selected in the Queue when they show."""
+        jobs = [j for j in self.selected_jobs() if j["state"] in ("done", "failed", "cancelled")]
+        if not jobs:
+            return
+        held = self.add_held.isChecked()
+
+        def reprint(c):
+            out = []
+            for j in jobs:
+                try:
+                    out.append((j, c.reprint(j["id"], hold=True) if held else c.reprint(j["id"]),
+                                None))
+                except Exception as exc:  # noqa: BLE001 - named per job; the others go on
+                    out.append((j, None, str(exc)))
+            return out
+
+        def done(results):
+            ids = []
+            for j, new, err in results:
+                if new is None:
+                    log.error("job %s %s: reprint refused: %s", j["id"], safe(j["name"]),
+                              short_paths(err))
+                    self.statusBar().showMessage(f"job {j['id']}: {short_paths(err)}", 15000)
+                    continue
+                ids.append(new["id"])
+                log.info("job %s %s: reprinted as job %s%s", j["id"], safe(j["name"]), new["id"],
+                         " (held)" if new["state"] == "held" else "")
+            self._select_new = set(ids)
+            self._select_added()
+        self.link.call(reprint, done)
+
+    def apply_fit_offer(self, offer: dict) -> None:
+        """A fit offer taken (Fit to width, Rotate 90°): its settings change on the job shown."""
+        jobs = [j for j in self.selected_jobs() if j["state"] in ("queued", "held")]
+        if not jobs:
+            return
+        j = jobs[0]
+        change = offer["settings"]
+        self.link.call(lambda c, _id=j["id"]: c.edit(_id, settings=change),
+                       lambda job: log.info("job %s %s: %s: now %s × %s mm", job["id"],
+                                            safe(job["name"]), offer["kind"],
+                                            f"{offer['width_mm']:,.0f}", f"{offer['height_mm']:,.0f}"))
+
     def _priority(self, step: int) -> None:
         for j in self.selected_jobs():
             if j["state"] in ("queued", "held"):
@@ -836,6 +968,8 @@ class MainWindow(QMainWindow):
     def printer_action(self, printer: str, what: str, body) -> None:
         if what == "test-prints":
             return self.open_calibration(printer)
+        if what == "roll":
+            return self.load_roll(printer, body)
         detail = f" ({body.get('then') or body.get('action')})" if body else ""
         card = self.printers_panel.cards.get(printer)
         if what == "head-care" and card is not None:
@@ -859,6 +993,24 @@ class MainWindow(QMainWindow):
             self._request_failed(msg)
         self.link.call(lambda c: c.printer_action(printer, what, body), done, failed, ordered=True)
 
+    def load_roll(self, printer: str, body: dict | None = None) -> None:
+        """The roll on `printer` (docs/server.md "Rolls"): `body` as the API takes it, or the
+        roll dialog's (media from the media library, length or the roll's label)."""
+        if body is None:
+            from .rolls import RollDialog
+            p = next((x for x in self.printers if x["name"] == printer), {})
+            dlg = RollDialog(printer, p.get("roll"), self.link.state_dir, self)
+            if not dlg.exec():
+                return
+            body = dlg.body()
+
+        def done(r):
+            roll = r.get("roll")
+            log.info("printer %s: %s", printer, "roll taken off" if roll is None else
+                     f"roll {roll['media']} loaded" + (f", {roll['remaining_m']:,.2f} m"
+                                                       if roll.get("remaining_m") is not None else ""))
+        self.link.call(lambda c: c.roll(printer, body), done, self._request_failed, ordered=True)
+
     def _update_actions(self) -> None:
         jobs = self.selected_jobs()
         states = {j["state"] for j in jobs}
@@ -866,6 +1018,7 @@ class MainWindow(QMainWindow):
         a["hold"].setEnabled("queued" in states)
         a["release"].setEnabled(any(j["state"] == "held" and not j.get("fault") for j in jobs))
         a["requeue"].setEnabled(bool(states & {"failed", "cancelled"}))
+        a["reprint"].setEnabled(bool(states & {"done", "failed", "cancelled"}))
         a["cancel"].setEnabled(bool(states & {"queued", "held", "printing"}))
         waiting = bool(states & {"queued", "held"})
         a["up"].setEnabled(waiting)

@@ -17,6 +17,14 @@ from ..estimate import fmt_duration
 from .messages import plain_message, short_paths
 
 
+def roll_text(roll: dict | None) -> str:
+    """The roll on a printer in a few words (docs/server.md "Rolls")."""
+    if not roll:
+        return " · no roll loaded"
+    left = roll.get("remaining_m")
+    return f" · {roll['media']}" + ("" if left is None else f", {left:,.2f} m left")
+
+
 def _fixed_lines(label: QLabel, lines: int) -> QLabel:
     label.setWordWrap(True)
     label.setAlignment(Qt.AlignTop | Qt.AlignLeft)
@@ -99,10 +107,17 @@ class PrinterCard(QFrame):
                             ("Park and cap", "cap"), ("Uncap", "uncap")):
             m.addAction(label, lambda _w=what: self.action.emit(self.name, "head-care", {"action": _w}))
         self.care.setMenu(m)
+        # the roll loaded (docs/server.md "Rolls"): media, length left; the server counts feeds
+        self.roll = QPushButton("Roll…")
+        self.roll.setObjectName("printer_roll")
+        self.roll.setToolTip("the roll loaded: its media and length (the server counts every "
+                             "feed off it and holds a job the roll cannot hold)")
+        self.roll.clicked.connect(lambda: self.action.emit(self.name, "roll", None))
         row.addWidget(self.pause)
         row.addWidget(self.clear)
         row.addWidget(self.tests)
         row.addWidget(self.care)
+        row.addWidget(self.roll)
         # head care (or another printer request) running: a busy bar and what runs, in the
         # button row (its height does not change: nothing moves when it shows)
         self.busy = QProgressBar()
@@ -221,9 +236,10 @@ class PrinterCard(QFrame):
             self.progress.setFormat("")
             self.progress.setToolTip("")
             pm = p.get("printable_mm")
-            self.telemetry.setText("" if pm is None else
-                                   f"paper: {pm:,.0f} mm printable"
-                                   + ("" if p.get("paper_mm") is not None else " (profile's sheet)"))
+            self.telemetry.setText(("" if pm is None else
+                                    f"paper: {pm:,.0f} mm printable"
+                                    + ("" if p.get("paper_mm") is not None else " (profile's sheet)"))
+                                   + roll_text(p.get("roll")))
             self.telemetry.setToolTip("the paper's width less the side margins; measured by "
                                       "the printer at its last job")
         if fault:
@@ -238,6 +254,7 @@ class PrinterCard(QFrame):
         self.clear.setEnabled(bool(fault))
         self.tests.setEnabled(not fault and not cur)
         self.care.setEnabled(not fault and not cur and not busy)
+        self.roll.setEnabled(not cur)
 
 
 class PrintersPanel(QScrollArea):

@@ -21,6 +21,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
@@ -123,6 +124,7 @@ class ServerLink(QObject):
         self._stop = threading.Event()
         self._events: threading.Thread | None = None
         self._resp = None
+        self._sock: Any = None             # the event stream's socket (stop() shuts it down)
         self._answer.connect(self._deliver)
 
     def _deliver(self, callback, value) -> None:
@@ -160,11 +162,15 @@ class ServerLink(QObject):
 
     def stop(self) -> None:
         self._stop.set()
-        resp = self._resp
-        if resp is not None:
+        # the event stream's reader is blocked in readline: shut its socket down, which ends
+        # that read at once (closing the response here instead waits for the reader's
+        # buffer lock - up to the next event, ~15 s: the window took that long to close)
+        sock = self._sock
+        if sock is not None:
+            import socket
             try:
-                resp.close()
-            except Exception:  # noqa: BLE001
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
                 pass
         for ex in (self.pool, self.ordered):
             ex.shutdown(wait=False, cancel_futures=True)
@@ -194,7 +200,9 @@ class ServerLink(QObject):
                 resp = conn.getresponse()
                 if resp.status != 200:
                     raise ConnectionError(f"HTTP {resp.status}")
-                self._resp = resp
+                self._resp, self._sock = resp, conn.sock
+                if self._stop.is_set():              # stop() came between: end now
+                    break
                 self.connected.emit(True, "")
                 backoff = 0.5
                 kind, data = None, []
@@ -220,7 +228,7 @@ class ServerLink(QObject):
                 backoff = min(backoff * 2, 5.0)
                 self._rediscover()
             finally:
-                self._resp = None
+                self._resp, self._sock = None, None
                 conn.close()
 
     def _dispatch(self, kind: str, data: str) -> None:
