@@ -20,6 +20,7 @@ so the chord error is stated on the media: at most `CHORD_MM` (0.01 mm).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import subprocess
@@ -461,9 +462,18 @@ def write_cut_files(state_dir, job_id: int, rip, settings, profile) -> dict:
         plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
         files = [rip.path, *getattr(rip, "more", ())]
     job = cut_job(files if plan is not None else files[0], settings, profile, None, plan)
-    os.makedirs(os.path.join(os.fspath(state_dir), "cut"), exist_ok=True)
+    folder = os.path.join(os.fspath(state_dir), "cut")
+    os.makedirs(folder, exist_ok=True)
     for name in SERVER_CUT_FILES:
-        path = server_cut_path(state_dir, job_id, name)
-        write_cut_file(path + ".tmp" + os.path.splitext(name)[1], job)
-        os.replace(path + ".tmp" + os.path.splitext(name)[1], path)
+        # written aside under a name of its own (the worker and an API request may write
+        # the same job's file at once), then renamed into place
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{int(job_id)}-", suffix=os.path.splitext(name)[1])
+        os.close(fd)
+        try:
+            write_cut_file(tmp, job)
+            os.replace(tmp, server_cut_path(state_dir, job_id, name))
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
     return dict(paths=len(job.paths), marks=len(job.marks), files=list(SERVER_CUT_FILES))

@@ -840,8 +840,9 @@ class ApiHandler(BaseHTTPRequestHandler):
             return self._error(status, str(exc), close=bool(self._body_left))
 
     def _cut_file(self, job_id: int, name: str) -> bytes:
-        """A print-and-cut job's cut file (docs/cut.md): as its rip wrote it, or made now
-        from its spooled file (a queued job, for the GUI's preview)."""
+        """A print-and-cut job's cut file (docs/cut.md): as its rip wrote it, or, for a job
+        not ripped yet (queued, held: its settings may have been edited), made now from its
+        spooled file (the GUI's preview)."""
         import os
         from ...rip.cut import server_cut_path, write_cut_files
         from .validate import job_rip_settings
@@ -849,7 +850,7 @@ class ApiHandler(BaseHTTPRequestHandler):
         job = self.srv.spool.get(job_id)
         if job is None:
             raise Invalid(f"no job {job_id}", 404)
-        if not os.path.exists(path):
+        if not os.path.exists(path) or job["state"] in ("queued", "held"):
             rs, media_profile = job_rip_settings(job["settings"], self.srv.profile, self.srv.state_dir)
             if rs.placement.marks != "cut":
                 raise Invalid(f"job {job_id} has no cut file: it is not a print-and-cut job "
