@@ -12,15 +12,13 @@ if "WIDEPRINT_CACHE_DIR" not in os.environ:
     os.environ["WIDEPRINT_CACHE_DIR"] = tempfile.mkdtemp(prefix="wideprint-test-cache-")
     atexit.register(shutil.rmtree, os.environ["WIDEPRINT_CACHE_DIR"], True)
 
-import numpy as np
 import pytest
-import tifffile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-ROOT = Path(__file__).resolve().parent.parent
-
-from wideprint.rip.place import Placement  # noqa: E402
+# the shared helpers live in tests/support, and test files import them from there
+# (tests/test_support.py); this file turns them into fixtures
+from support.server import ServerProcess, inprocess_server  # noqa: E402
 
 
 def _import_the_package_now() -> None:
@@ -56,41 +54,38 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(getattr(pytest.mark, name))
 
 
-# 1 image pixel = 1 device dot: the placement for tests that compare the media with the
-# planes they wrote (a physical-size placement resamples them)
-PX = Placement(size="pixels")
-
-
 @pytest.fixture(scope="session")
 def profile():
     from wideprint.rip.profile import load_profile
     return load_profile()
 
 
-# the default profile's device grid at 300 dpi: 300 columns and 25400 / 68.55 rows per inch
-DEVICE_PPI = (300.0, 25400 / 68.55)
+@pytest.fixture
+def print_server(tmp_path):
+    """Start in-process print servers (support.server.inprocess_server): call it with the
+    ServerConfig fields that differ (`root` defaults to a fresh folder under tmp_path);
+    every server it started is stopped after the test."""
+    started = []
+
+    def start(root=None, **config):
+        root = root or tmp_path / f"server{len(started)}"
+        started.append(inprocess_server(root, **config))
+        return started[-1]
+    yield start
+    for s in reversed(started):
+        s.stop(timeout=5)
 
 
-def write_cmyk_tiff(path, planes01: np.ndarray) -> Path:
-    """A CMYK TIFF whose channels hold only 0 and 255, from 0/1 planes (h, w, 4), tagged
-    with the 300 dpi device grid's resolution, so that even a physical-size placement
-    prints it 1 pixel = 1 dot."""
-    tifffile.imwrite(path, (planes01 * 255).astype(np.uint8), photometric="separated",
-                     resolution=DEVICE_PPI, resolutionunit="INCH")
-    return Path(path)
+@pytest.fixture
+def server_process():
+    """Start `wideprint serve` processes (support.server.ServerProcess(state, *args, ...));
+    every one still running is stopped (SIGTERM) after the test."""
+    started = []
 
-
-def random_planes(h: int, w: int, density: float = 0.3, seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return (rng.random((h, w, 4)) < density).astype(np.uint8)
-
-
-def read_bands(src, rows: int = 37) -> np.ndarray:
-    """All of an image source's bands, checking their heights, shape and dtype."""
-    parts = list(src.bands(rows))
-    for p in parts[:-1]:
-        assert p.shape[0] == rows
-    arr = np.concatenate(parts, axis=0)
-    assert arr.shape == (src.height, src.width, src.channels)
-    assert arr.dtype == (np.uint16 if src.depth == 16 else np.uint8)
-    return arr
+    def start(state, *args, **kw):
+        started.append(ServerProcess(state, *args, **kw))
+        return started[-1]
+    yield start
+    for s in reversed(started):
+        if s.proc.poll() is None:
+            s.stop()

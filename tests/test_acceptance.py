@@ -7,20 +7,12 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import PX, ROOT, random_planes, write_cmyk_tiff
+from support.images import PX, ROOT, random_planes, write_cmyk_tiff
+from support.printing import print_on_emulator
 from wideprint.app.devices import open_device
 from wideprint.driver.job import JobError, PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
 from wideprint.rip.planes import read_planes
-
-
-def print_on_emulator(path, settings, profile, media, faults=None):
-    dev = open_device("emulator", profile, faults, media_path=str(media))
-    try:
-        rep = PrintJob(dev, RipJob(str(path), settings, profile)).run()
-    finally:
-        dev.emulator.close()
-    return rep, dev.emulator
 
 
 @pytest.mark.parametrize("dpi,passes,bidir", [
@@ -208,7 +200,7 @@ def test_one_pass_job_with_dead_nozzles_on_neighbouring_rows_fails_before_anythi
     """One pass gives a dead row's dots to its neighbours (rip/deadrows.py); when a
     neighbour row is dead too, the planner's refusal is the job's failure, before the
     printer is touched (the CLI and the server go on with the next job)."""
-    from test_swath import variant_profile
+    from support.printing import variant_profile
     prof = variant_profile(tmp_path, dead=[("M1", 57), ("M2", 57)])      # slots 114, 115
     src = write_cmyk_tiff(tmp_path / "one.tif", random_planes(60, 50, seed=4))
     dev = open_device("emulator", prof, None, media_path=str(tmp_path / "m.tif"))

@@ -17,8 +17,8 @@ import time
 
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
-from test_server import wait_for
+from support.images import random_planes, write_cmyk_tiff
+from support.server import wait_for
 from wideprint.app.server_cli import ApiError, Client, main
 
 PY = sys.executable

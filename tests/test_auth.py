@@ -19,8 +19,8 @@ import sys
 
 import pytest
 
-from conftest import ROOT, random_planes, write_cmyk_tiff
-from test_server import raw_request
+from support.images import ROOT, random_planes, write_cmyk_tiff
+from support.server import raw_request
 from wideprint.app.server_cli import ApiError, Client
 
 PY = sys.executable

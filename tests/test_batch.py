@@ -18,7 +18,7 @@ import pytest
 import pyvips
 import tifffile
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from corpus import bmp_rgb24, bmp_rle, gradient_rgb
 from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import PX, write_cmyk_tiff
+from support.images import PX, write_cmyk_tiff
 from wideprint.app.calibrate import CalibrationError, calibrate
 from wideprint.app.cli import main
 from wideprint.app.devices import open_device

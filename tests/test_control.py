@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.app.devices import open_device
 from wideprint.driver.job import JobCancelled, JobError, PrintJob
 from wideprint.driver import protocol as P

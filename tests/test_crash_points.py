@@ -8,20 +8,18 @@ that outlives the server, and a standalone emulator switched off and on while th
 is down.  The server kills itself at the point (`WIDEPRINT_CRASH_AT`, app/server/
 crashpoints.py), so each point is hit exactly, not by a race."""
 
-import json
-import os
 import signal
 import socket
 import sqlite3
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
-from wideprint.app.server_cli import ApiError, Client
+from support.images import random_planes, write_cmyk_tiff
+from support.server import readline, start_server, stop, wait_for
+from wideprint.app.server_cli import ApiError
 from wideprint.rip.pipeline import RipJob
 from wideprint.rip.planes import read_planes
 from wideprint.rip.profile import load_profile
@@ -34,15 +32,6 @@ FINAL = ("done", "failed", "cancelled")
 
 
 # -- processes -----------------------------------------------------------------------------------
-def _line(proc, timeout):
-    import select
-    ready, _, _ = select.select([proc.stdout], [], [], timeout)
-    if not ready:
-        proc.kill()
-        raise AssertionError("no output from " + " ".join(proc.args) + "\n" + proc.stderr.read())
-    return proc.stdout.readline()
-
-
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -64,7 +53,7 @@ class Emulator:
              "--data-port", str(self.ports[1]), "--media-out", str(self.tmp / "media-{job}.tif"),
              "--event-log", str(self.tmp / f"emulator-{self.boots}.jsonl")],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = _line(self.proc, 60)
+        line = readline(self.proc, 60)
         assert line.startswith("device: "), self.proc.stderr.read()
         self.spec = line.split(" ", 1)[1].strip()
         return self.spec
@@ -76,42 +65,6 @@ class Emulator:
 
     def media(self, jid):
         return self.tmp / f"media-{jid}.tif"
-
-
-def start_server(state, device, media_dir=None, crash=None, on_crash="resume"):
-    env = dict(os.environ)
-    env.pop("WIDEPRINT_CRASH_AT", None)
-    if crash:
-        env["WIDEPRINT_CRASH_AT"] = crash
-    args = [PY, "-m", "wideprint.app.server_cli", "serve", "--device", device,
-            "--state-dir", str(state), "--port", "0", "--on-crash", on_crash]
-    if media_dir:
-        args += ["--media-dir", str(media_dir)]
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    line = _line(proc, 60)
-    assert line.startswith("wideprint serve: http://127.0.0.1:"), line + proc.stderr.read()
-    return proc, Client(state, url=line.split()[2])
-
-
-def stop(proc):
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        _, err = proc.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        _, err = proc.communicate()
-    return err
-
-
-def wait_for(cond, timeout=60.0, what="condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        v = cond()
-        if v:
-            return v
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def db_rows(state, sql, *args):
@@ -164,7 +117,8 @@ def _run(tmp_path, job_file, point_id, printer):
         emu = Emulator(tmp_path)
         device, media = emu.start(), emu.media
     try:
-        srv, client = start_server(state, device, media_dir if emu is None else None, crash=point)
+        srv, client = start_server(state, device, media_dir=media_dir if emu is None else None,
+                                   crash=point)
         key = f"crash-{point_id}"
         jid = None
         try:
@@ -176,7 +130,7 @@ def _run(tmp_path, job_file, point_id, printer):
         if printer == "power-cycled":
             emu.stop()
             assert emu.start() == device              # same ports: same spec, a new power-up
-        srv, client = start_server(state, device, media_dir if emu is None else None)
+        srv, client = start_server(state, device, media_dir=media_dir if emu is None else None)
         try:
             if jid is None:                            # the client retries with its key
                 again = client.submit(src, copies=COPIES, settings=SETTINGS, key=key)

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import ROOT, random_planes, write_cmyk_tiff
+from support.images import ROOT, random_planes, write_cmyk_tiff
 from private_cups import private_cupsd
 from support.cups import conversions_from
 from wideprint.app.server_cli import Client

@@ -8,7 +8,6 @@ stderr is only `LEVEL: one line` messages, never a traceback."""
 
 import json
 import os
-import select
 import shutil
 import signal
 import socket
@@ -20,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROOT, random_planes, write_cmyk_tiff
-from wideprint.app.server_cli import Client
+from support.images import ROOT, random_planes, write_cmyk_tiff
+from support.server import ServerProcess
 
 BACKEND = ROOT / "resources" / "cups" / "wideprint"
 OK, FAILED, AUTH_REQUIRED, HOLD, STOP, CANCEL, RETRY = range(7)
@@ -67,22 +66,10 @@ def uri_of(state):
 # -- a real server ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    state = tmp_path_factory.mktemp("cupsbk") / "state"
-    proc = subprocess.Popen([sys.executable, "-m", "wideprint.app.server_cli", "serve",
-                             "--device", "emulator", "--state-dir", str(state), "--port", "0",
-                             "--paused", "--max-file-size", str(MAX_FILE)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 60)
-    line = proc.stdout.readline() if ready else ""
-    assert line.startswith("wideprint serve: http://127.0.0.1:"), line + (
-        "" if ready else "(no answer)")
-    yield state, Client(state, url=line.split()[2])
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
+    srv = ServerProcess(tmp_path_factory.mktemp("cupsbk") / "state", "--paused",
+                        "--max-file-size", str(MAX_FILE))
+    yield srv.state, srv.client
+    srv.stop()
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import PX
-from test_swath import variant_profile
+from support.images import PX
+from support.printing import variant_profile
 from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings

@@ -14,8 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
-from test_crash_points import start_server, stop, wait_for
+from support.images import random_planes, write_cmyk_tiff
+from support.server import start_server, stop, wait_for
 from wideprint.rip.planes import read_planes
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason="mounting a tmpfs needs root")
@@ -52,7 +52,7 @@ def fill(mnt):
 def test_a_job_waits_for_space_then_prints_and_nothing_loops(small_disk, tmp_path):
     planes = random_planes(200, 300, seed=44)
     src = write_cmyk_tiff(tmp_path / "a.tif", planes)
-    srv, client = start_server(small_disk, "emulator", tmp_path / "media")
+    srv, client = start_server(small_disk, "emulator", media_dir=tmp_path / "media")
     try:
         jid = client.submit(src, hold=True, settings={"passes": 2})["job"]["id"]
         filler = fill(small_disk)
@@ -86,7 +86,7 @@ def test_a_job_waits_for_space_then_prints_and_nothing_loops(small_disk, tmp_pat
 def test_a_job_printing_when_the_disk_fills_ends_done_when_space_returns(small_disk, tmp_path):
     planes = random_planes(900, 600, seed=45)
     src = write_cmyk_tiff(tmp_path / "b.tif", planes)
-    srv, client = start_server(small_disk, "emulator", tmp_path / "media")
+    srv, client = start_server(small_disk, "emulator", media_dir=tmp_path / "media")
     try:
         jid = client.submit(src, settings={"passes": 4})["job"]["id"]
         wait_for(lambda: client.job(jid)["strokes_done"] >= 1, 60, what="printing")
@@ -116,7 +116,7 @@ def test_a_full_media_disk_does_not_wedge_the_emulated_printer(small_disk, tmp_p
     media = small_disk                     # here the tmpfs holds the media, not the state
     planes = [random_planes(300, 400, seed=s) for s in (46, 47)]
     srcs = [write_cmyk_tiff(tmp_path / f"m{i}.tif", p) for i, p in enumerate(planes)]
-    srv, client = start_server(tmp_path / "srv", "emulator", media)
+    srv, client = start_server(tmp_path / "srv", "emulator", media_dir=media)
     try:
         filler = fill(media)
         first = client.submit(srcs[0])["job"]["id"]

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import ROOT  # noqa: F401
+from support.images import ROOT  # noqa: F401
 from wideprint.rip import ghostscript as G
 from wideprint.rip.document import DocumentSource
 from wideprint.rip.inputs import sniff_input

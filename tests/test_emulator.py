@@ -4,7 +4,7 @@ injected fault the way the device would."""
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.device_sim.endpoints import in_process
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.printer import Printer
@@ -152,7 +152,7 @@ def test_nozzle_check_fires_nozzles_the_profile_lists_as_dead(tmp_path, profile)
     """A test print ignores the profile's dead list (one pass could not avoid them, and the
     check must show whether a marked nozzle works again): a listed nozzle that works prints
     its row, one that is really dead misses exactly its row."""
-    from test_swath import variant_profile
+    from support.printing import variant_profile
     listed = variant_profile(tmp_path, dead=[("M1", 57), ("K2", 3)])
     assert listed.dead_nozzles
     job = PatternJob.for_pattern("nozzle-check", listed, 160)

@@ -6,7 +6,7 @@ media is bit-exact, no dot printed twice, none missing."""
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.app.devices import close_device, open_device
 from wideprint.device_sim.faults import Faults
 from wideprint.driver.job import JobError, PrintJob

@@ -27,55 +27,8 @@ from PySide6.QtCore import QMimeData, QPoint, QPointF, Qt, QUrl  # noqa: E402
 from PySide6.QtGui import QDragEnterEvent, QDropEvent  # noqa: E402
 from PySide6.QtWidgets import QApplication, QHeaderView, QLabel  # noqa: E402
 
-from conftest import random_planes, write_cmyk_tiff  # noqa: E402
-from wideprint.app.gui.main_window import MainWindow  # noqa: E402
-from wideprint.app.gui.server_link import ServerLink, find_or_start  # noqa: E402
-from wideprint.app.server_cli import Client  # noqa: E402
+from support.gui import LONG, Server, image, job_named, names_in, open_window, select  # noqa: E402
 from wideprint.rip.planes import read_planes  # noqa: E402
-
-LONG = 90_000          # ms: whole jobs on a loaded 2-core machine
-CLI = [sys.executable, "-m", "wideprint.app.cli"]
-
-
-# -- a real server process -----------------------------------------------------------------
-class Server:
-    def __init__(self, root: Path, *extra: str):
-        self.state = root / "state"
-        self.media = root / "media"
-        self.hot = root / "hot"
-        self.root = root
-        self.log = open(root / "server.out", "ab")
-        self.proc = subprocess.Popen(
-            CLI + ["serve", "--state-dir", str(self.state), "--media-dir", str(self.media),
-                   "--hot-folder-root", str(self.hot), "--port", "0", "--settle-time", "0.3",
-                   "--scan-interval", "0.2", *extra],
-            stdout=self.log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            try:
-                self.client = Client(self.state)
-                self.client.status()
-                return
-            except Exception:  # noqa: BLE001 - not up yet
-                assert self.proc.poll() is None, (root / "server.out").read_text()
-                time.sleep(0.1)
-        raise AssertionError("the server did not start")
-
-    def cli(self, *args: str) -> str:
-        r = subprocess.run(CLI + [args[0], "--state-dir", str(self.state), *args[1:]],
-                           capture_output=True, text=True, timeout=120)
-        assert r.returncode == 0, r.stderr
-        return r.stdout
-
-    def stop(self) -> None:
-        self.client.close()
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-        self.log.close()
 
 
 @pytest.fixture
@@ -85,45 +38,11 @@ def server(tmp_path):
     s.stop()
 
 
-def open_window(qtbot, srv: Server, cfg: Path) -> MainWindow:
-    client, proc = find_or_start(srv.state)
-    assert proc is None                            # the running server, not a new one
-    w = MainWindow(ServerLink(srv.state, client), config_dir=cfg)
-    w.ask_before_closing = False
-    qtbot.addWidget(w)
-    w.resize(1366, 768)
-    w.show()
-    qtbot.waitUntil(lambda: bool(w.printers), timeout=20_000)
-    return w
-
-
 @pytest.fixture
 def win(qtbot, server, tmp_path):
     w = open_window(qtbot, server, tmp_path / "cfg")
     yield w
     w.link.stop()
-
-
-def image(tmp_path: Path, name: str, seed: int, rows: int = 300, cols: int = 400):
-    planes = random_planes(rows, cols, seed=seed)
-    return write_cmyk_tiff(tmp_path / name, planes), planes
-
-
-def names_in(view) -> list[str]:
-    return [j["name"] for j in view.model().jobs]
-
-
-def job_named(win, name: str) -> dict:
-    for j in win.queue_model.jobs + win.history_model.jobs:
-        if j["name"] == name:
-            return j
-    raise KeyError(name)
-
-
-def select(win, names) -> None:
-    win.tabs.setCurrentIndex(0)
-    win.queue_view.select_ids([job_named(win, n)["id"] for n in names])
-    win._show_selection()
 
 
 def media_of(srv: Server, job_id: int) -> np.ndarray:

@@ -17,7 +17,7 @@ from PySide6.QtGui import QImage, QPainter, QWheelEvent  # noqa: E402
 from PySide6.QtWidgets import (QAbstractSlider, QAbstractSpinBox, QApplication, QComboBox,  # noqa: E402
                                QMessageBox, QStyleOptionViewItem)
 
-from test_gui import LONG, Server, image, job_named, names_in, open_window, select  # noqa: E402
+from support.gui import LONG, Server, image, job_named, names_in, open_window, select  # noqa: E402
 from wideprint.app.gui.main_window import MainWindow  # noqa: E402
 from wideprint.app.gui.server_link import ServerLink, find_or_start  # noqa: E402
 

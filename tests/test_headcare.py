@@ -10,7 +10,7 @@ import threading
 import numpy as np
 import pytest
 
-from conftest import PX, ROOT, random_planes, write_cmyk_tiff
+from support.images import PX, ROOT, random_planes, write_cmyk_tiff
 from wideprint.app.devices import close_device, open_device
 from wideprint.device_sim.faults import Faults
 from wideprint.driver import protocol as P

@@ -16,7 +16,7 @@ import pyvips
 import tifffile
 
 from corpus import bmp_indexed, bmp_rgb24, bmp_rle, gradient_rgb, set_jpeg_size
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, write_cmyk_tiff
 from wideprint.rip.planes import read_planes
 
 PY = sys.executable

@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
-from test_server import tiny_tiff, wait_for
+from support.images import random_planes, tiny_tiff, write_cmyk_tiff
+from support.server import inprocess_server, wait_for
 from wideprint.app.server_cli import Client
 from wideprint.rip.planes import read_planes
 
@@ -24,14 +24,9 @@ SETTLE = 0.8
 
 @pytest.fixture
 def hot(tmp_path, caplog):
-    from wideprint.app.server import PrintServer, ServerConfig
     caplog.set_level(logging.DEBUG, logger="wideprint")
-    cfg = ServerConfig(device="emulator", state_dir=tmp_path / "state",
-                       media_dir=tmp_path / "media", hot_folder_root=tmp_path / "hot", port=0,
-                       scan_interval=SCAN, settle_s=SETTLE, max_file_bytes=2_000_000)
-    server = PrintServer(cfg)
-    server.start()
-    server.root = tmp_path
+    server = inprocess_server(tmp_path, scan_interval=SCAN, settle_s=SETTLE,
+                              max_file_bytes=2_000_000)
     server.outside = tmp_path / "outside"
     server.outside.mkdir()
     server.client = Client(server.state_dir)

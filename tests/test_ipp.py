@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, write_cmyk_tiff
 from private_cups import IppServe, assert_bit_exact, free_port, wait_job
 from wideprint.app.api import rip
 from wideprint.app.ipp.bridge import find_binary

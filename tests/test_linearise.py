@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from test_swath import variant_profile
+from support.printing import variant_profile
 from wideprint.app.cli import main
 from wideprint.rip.color import Separator
 from wideprint.rip.pipeline import RipJob, RipSettings, profile_curves

@@ -22,7 +22,7 @@ from wideprint.rip.load import ImageError, ImageSource, open_image
 
 sys.path.insert(0, str(Path(__file__).parent))
 import corpus  # noqa: E402
-from conftest import read_bands  # noqa: E402
+from support.images import read_bands  # noqa: E402
 from corpus import (bmp_bytes, bmp_indexed, bmp_packed, bmp_rgb24, bmp_rle, gradient_rgb,  # noqa: E402
                     strip_app14)
 

@@ -10,7 +10,7 @@ import re
 
 import pytest
 
-from conftest import ROOT
+from support.images import ROOT
 from support import marks
 
 TESTS = ROOT / "tests"

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, write_cmyk_tiff
 import wideprint.rip.layout  # noqa: F401 - imported here, before the server's threads do
 from wideprint.app.server_cli import ApiError, Client
 from wideprint.rip.pipeline import RipJob

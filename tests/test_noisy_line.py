@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.app.devices import close_device, open_device
 from wideprint.device_sim.faults import Faults
 from wideprint.driver import protocol as P

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.app.devices import open_device
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.pci_card import EmulatedPciCard

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import PX
+from support.images import PX
 from wideprint.app.devices import open_device
 from wideprint.device_sim.faults import Faults, Length
 from wideprint.device_sim.physical import PhysicalModel, dot_diameter_um

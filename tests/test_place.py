@@ -23,7 +23,7 @@ from corpus import bmp_rgb24, gradient_rgb  # noqa: E402
 ROW_UM = 68.55  # default profile: 137.1 um nozzle pitch / 2 heads per colour -> 370.53 rows/inch
 
 
-from conftest import read_bands as read_all  # noqa: E402
+from support.images import read_bands as read_all  # noqa: E402
 
 
 def vips_resize(arr: np.ndarray, w: int, h: int, kernel: str, interpretation: str | None = None) -> np.ndarray:

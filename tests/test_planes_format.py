@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import PX, ROOT, random_planes, write_cmyk_tiff
+from support.images import PX, ROOT, random_planes, write_cmyk_tiff
 from wideprint.app import cli
 from wideprint.app.compare import compare
 from wideprint.rip import pipeline

@@ -75,7 +75,7 @@ def test_a_layout_previews_its_items_marks_and_gaps(tmp_path):
     """The job preview of a step-and-repeat (app/jobpreview.py, the server's and so the
     GUI's): every slot of the plan carries the item's ink, the gaps between them none, the
     crop marks are there, and the estimate is the whole sheet's."""
-    from conftest import random_planes, write_cmyk_tiff
+    from support.images import random_planes, write_cmyk_tiff
     from wideprint.app.jobpreview import compute_preview
     from wideprint.rip.profile import load_profile
     from wideprint.rip.settings import from_mapping
@@ -142,7 +142,7 @@ def test_the_streamed_preview_is_the_whole_one(tmp_path, shape, max_side):
     """Made band by band, the picture is the one the whole-array filter made: within one
     level of 255 (float sums in another order), downscaled, upscaled (a small print: the
     picture finer than the dots) and a sliver."""
-    from conftest import random_planes
+    from support.images import random_planes
     h, w = shape
     planes = random_planes(h, w, density=0.35, seed=h)
     planes[h // 3: h // 2, :, 2] = 1                          # a yellow bar: edges to keep

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from test_standalone import start_emulator
+from support.server import start_emulator
 from wideprint.app.devices import close_device, open_device
 from wideprint.device_sim.faults import Faults
 from wideprint.driver import protocol as P

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, write_cmyk_tiff
 from wideprint.app.server_cli import ApiError, Client
 from wideprint.rip.planes import read_planes
 

@@ -4,7 +4,7 @@ no stroke printed twice, none missing (issue 5)."""
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.device_sim.faults import Faults
 from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob

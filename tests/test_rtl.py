@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import corpus
-from conftest import DEVICE_PPI, random_planes
+from support.images import DEVICE_PPI, random_planes
 from rtl_encode import CONFIGS, ESC, encode_bits, encode_contone, expected_dots
 from wideprint.rip.inputs import sniff_input
 from wideprint.rip.load import ImageError
@@ -107,7 +107,7 @@ def test_commands_and_data_across_read_chunks(tmp_path, monkeypatch):
     ("cid-k", 5),
 ])
 def test_rtl_prints_bit_exact_on_the_emulator(tmp_path, profile, config, mode):
-    from test_acceptance import print_on_emulator
+    from support.printing import print_on_emulator
     dots = dots_pattern(260, 333, seed=mode + 10)
     p = tmp_path / "job.rtl"
     p.write_bytes(encode_bits(dots, config, mode))

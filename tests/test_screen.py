@@ -164,7 +164,7 @@ def test_block_packer_equals_general_packer_multipass(profile, passes, mask):
 
 
 def test_block_packer_with_dead_nozzles(tmp_path):
-    from test_swath import variant_profile
+    from support.printing import variant_profile
     prof = variant_profile(tmp_path, dead=[("M1", 57), ("K2", 3), ("C1", 10), ("C2", 10)])
     dots = (np.random.default_rng(9).random((400, 130, 4)) < 0.5).astype(np.uint8)
     for passes, mask in ((2, "checker"), (3, "feather"), (4, "random")):

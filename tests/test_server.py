@@ -11,7 +11,6 @@ import io
 import json
 import os
 import re
-import select
 import signal
 import sqlite3
 import subprocess
@@ -22,7 +21,9 @@ import time
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, tiny_tiff, write_cmyk_tiff
+from support.server import inprocess_server, raw_request, start_server, stop, wait_for
+from support.server import start_emulator as _start_emulator
 from wideprint.app.server_cli import ApiError, Client
 from wideprint.rip.planes import read_planes
 
@@ -31,53 +32,8 @@ DONE = ("done", "failed", "cancelled")
 
 
 # -- helpers ------------------------------------------------------------------------------------
-def _readline(proc, timeout: float) -> str:
-    ready, _, _ = select.select([proc.stdout], [], [], timeout)
-    if not ready:
-        proc.kill()
-        raise AssertionError("no output from " + " ".join(proc.args) + "\n" + proc.stderr.read())
-    return proc.stdout.readline()
-
-
 def start_emulator(tmp_path):
-    proc = subprocess.Popen([PY, "-m", "wideprint.app.cli", "emulator",
-                             "--media-out", str(tmp_path / "media-{job}.tif"),
-                             "--event-log", str(tmp_path / "emulator.jsonl")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = _readline(proc, 60)
-    assert line.startswith("device: "), proc.stderr.read()
-    return proc, line.split(" ", 1)[1].strip()
-
-
-def start_server(state, device, *extra):
-    proc = subprocess.Popen([PY, "-m", "wideprint.app.server_cli", "serve", "--device", device,
-                             "--state-dir", str(state), "--port", "0", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = _readline(proc, 60)
-    assert line.startswith("wideprint serve: http://127.0.0.1:"), line + proc.stderr.read()
-    url = line.split()[2]
-    return proc, Client(state, url=url)
-
-
-def stop(proc, sig=signal.SIGTERM):
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        out, err = proc.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-    return err
-
-
-def wait_for(cond, timeout=30.0, poll=0.02, what="condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        v = cond()
-        if v:
-            return v
-        time.sleep(poll)
-    raise AssertionError(f"timed out waiting for {what}")
+    return _start_emulator(tmp_path, event_log=tmp_path / "emulator.jsonl")
 
 
 def db_job(state, job_id):
@@ -169,14 +125,8 @@ def test_server_killed_mid_job_resumes_bit_exact(tmp_path, on_crash):
 # -- an in-process server for the API, hot folder and accounting tests --------------------------
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory):
-    from wideprint.app.server import PrintServer, ServerConfig
-    root = tmp_path_factory.mktemp("server")
-    cfg = ServerConfig(device="emulator", state_dir=root / "state", media_dir=root / "media",
-                       hot_folder_root=root / "hot", port=0, scan_interval=0.2,
-                       settle_s=1.0, max_file_bytes=2_000_000)
-    server = PrintServer(cfg)
-    server.start()
-    server.root = root
+    server = inprocess_server(tmp_path_factory.mktemp("server"), scan_interval=0.2,
+                              settle_s=1.0, max_file_bytes=2_000_000)
     yield server
     server.stop(timeout=5)
 
@@ -186,34 +136,6 @@ def client(srv):
     c = Client(srv.state_dir)
     yield c
     c.close()
-
-
-def raw_request(srv, method, path, body=b"", headers=None, token="default"):
-    conn = http.client.HTTPConnection("127.0.0.1", srv.port, timeout=30)
-    hdrs = dict(headers or {})
-    if token == "default":
-        token = srv.token
-    if token is not None:
-        hdrs["Authorization"] = f"Bearer {token}"
-    conn.request(method, path, body=body, headers=hdrs)
-    r = conn.getresponse()
-    data = r.read()
-    conn.close()
-    return r.status, json.loads(data) if data.startswith(b"{") else data
-
-
-TINY = None
-
-
-def tiny_tiff(tmp_path_factory=None) -> bytes:
-    global TINY
-    if TINY is None:
-        buf = io.BytesIO()
-        import tifffile
-        tifffile.imwrite(buf, (random_planes(8, 16, seed=5) * 255).astype(np.uint8),
-                         photometric="separated")
-        TINY = buf.getvalue()
-    return TINY
 
 
 def test_api_binds_loopback_and_token_file_is_private(srv):
@@ -373,11 +295,8 @@ def test_hold_release_cancel_and_priority(srv, client):
 
 
 # -- 1,000 concurrent submissions --------------------------------------------------------------
-def test_thousand_concurrent_submissions_accepted_once_in_order(tmp_path):
-    from wideprint.app.server import PrintServer, ServerConfig
-    server = PrintServer(ServerConfig(device="emulator", state_dir=tmp_path / "state", port=0,
-                                      start_paused=True))
-    server.start()
+def test_thousand_concurrent_submissions_accepted_once_in_order(tmp_path, print_server):
+    server = print_server(tmp_path, media=False, hot=False, start_paused=True)
     data = tiny_tiff()
     errors, per_client = [], {}
 
@@ -406,21 +325,18 @@ def test_thousand_concurrent_submissions_accepted_once_in_order(tmp_path):
     for t in threads:
         t.join()
     took = time.monotonic() - t0
-    try:
-        assert not errors, errors
-        jobs = Client(server.state_dir).jobs()
-        assert len(jobs) == 1000 and all(j["state"] == "queued" for j in jobs)
-        assert len({j["name"] for j in jobs}) == 1000
-        for n, ids in per_client.items():
-            assert len(ids) == 250 and ids == sorted(ids)          # monotonic per client
-            mine = [j for j in jobs if j["client"] == f"c{n}"]
-            assert [j["name"] for j in mine] == [f"c{n}-{i:03d}.tif" for i in range(250)]
-        # the queue order (position) is the acceptance order
-        pos = sorted(jobs, key=lambda j: j["position"])
-        assert [j["id"] for j in pos] == sorted(j["id"] for j in jobs)
-        assert len(list((server.state_dir / "spool").iterdir())) == 1000
-    finally:
-        server.stop(timeout=5)
+    assert not errors, errors
+    jobs = Client(server.state_dir).jobs()
+    assert len(jobs) == 1000 and all(j["state"] == "queued" for j in jobs)
+    assert len({j["name"] for j in jobs}) == 1000
+    for n, ids in per_client.items():
+        assert len(ids) == 250 and ids == sorted(ids)          # monotonic per client
+        mine = [j for j in jobs if j["client"] == f"c{n}"]
+        assert [j["name"] for j in mine] == [f"c{n}-{i:03d}.tif" for i in range(250)]
+    # the queue order (position) is the acceptance order
+    pos = sorted(jobs, key=lambda j: j["position"])
+    assert [j["id"] for j in pos] == sorted(j["id"] for j in jobs)
+    assert len(list((server.state_dir / "spool").iterdir())) == 1000
     print(f"1000 submissions in {took:.1f} s")
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from conftest import PX
+from support.images import PX
 from wideprint.app.devices import open_device
 from wideprint.device_sim.physical import dot_diameter_um
 from wideprint.device_sim.scanner import scanner_tone, sensor_lut

@@ -7,17 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
+from support.images import random_planes, write_cmyk_tiff
+from support.server import start_emulator
 from wideprint.rip.planes import read_planes
-
-
-def start_emulator(tmp_path, *extra):
-    proc = subprocess.Popen([sys.executable, "-m", "wideprint.app.cli", "emulator",
-                             "--media-out", str(tmp_path / "media-{job}.tif"), *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = proc.stdout.readline()
-    assert line.startswith("device: "), proc.stderr.read()
-    return proc, line.split(" ", 1)[1].strip()
 
 
 @pytest.mark.parametrize("serial,data", [("pty", "tcp"), ("socket", "tcp"), ("pty", "usb"),

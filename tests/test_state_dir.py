@@ -13,8 +13,8 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import random_planes, write_cmyk_tiff
-from test_crash_points import start_server, stop, wait_for
+from support.images import random_planes, write_cmyk_tiff
+from support.server import start_server, stop
 from wideprint.rip.planes import read_planes
 
 PY = sys.executable
@@ -32,7 +32,7 @@ def queued(tmp_path):
     planes = [random_planes(120, 90, seed=s) for s in (5, 6)]
     srcs = [write_cmyk_tiff(tmp_path / f"j{i}.tif", p) for i, p in enumerate(planes)]
     state = tmp_path / "state"
-    srv, client = start_server(state, "emulator", tmp_path / "media")
+    srv, client = start_server(state, "emulator", media_dir=tmp_path / "media")
     try:
         ids = [client.submit(s, hold=True, settings={"passes": 2})["job"]["id"] for s in srcs]
     finally:
@@ -75,7 +75,7 @@ def test_check_reports_and_repair_rebuilds_the_queue_held(queued, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     assert "rebuilt: 2 job(s)" in r.stdout
     assert list(state.glob("wideprint.db.lost-*"))          # set aside, never deleted
-    srv, client = start_server(state, "emulator", tmp_path / "media")
+    srv, client = start_server(state, "emulator", media_dir=tmp_path / "media")
     try:
         jobs = client.jobs()
         assert [j["state"] for j in jobs] == ["held", "held"]
@@ -96,7 +96,7 @@ def test_a_damaged_spool_copy_fails_its_job_naming_the_file(tmp_path):
     planes = random_planes(120, 90, seed=9)
     src = write_cmyk_tiff(tmp_path / "logo.tif", planes)
     state = tmp_path / "state"
-    srv, client = start_server(state, "emulator", tmp_path / "media")
+    srv, client = start_server(state, "emulator", media_dir=tmp_path / "media")
     try:
         jid = client.submit(src, hold=True)["job"]["id"]
         c = sqlite3.connect(state / "wideprint.db")

@@ -4,7 +4,7 @@ cycles) and the words each head latched, compared with the RIP's, for every pass
 import numpy as np
 import pytest
 
-from conftest import PX, random_planes, write_cmyk_tiff
+from support.images import PX, random_planes, write_cmyk_tiff
 from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings
