@@ -37,7 +37,12 @@ colour conversion between DeviceCMYK and the CMYK device); ImageMagick 6 (/usr/b
 References inside wideprint: ``ostromoukhov`` (Ostromoukhov 2001, his published table, no
 modulation: the issue's yardstick), ``bluenoise128`` (the screen before this work: the
 128 px mask with its old channel offsets) and ``bluenoise256`` (the first 256 px screen of
-this work, now vced's modulation mask, in today's channel layout).  Below the table: every
+this work, now vced's modulation mask, in today's channel layout); for issue 36 ``DBS``
+(direct binary search on the whole image - the bound - started from vced's dots, toggles
+and swaps with the 8 neighbours until a pass changes nothing, the eye model's fine
+Gaussian as its filter: issue 36's yardstick) and ``DBS tone`` (the same with ``dbs``'s
+objective - fine + 1.5 x coarse - and its tone guard: the bound of what ``dbs`` does row
+by row).  Below the table: every
 screen mask's noise over all 254 ink levels against the bound no threshold mask can beat
 (``rip.bluenoise.nested_bound``).  No assertions: a measurement; the targets of the
 issue are printed with met / MISSED.
@@ -70,6 +75,7 @@ CELL, START = 320, 64          # tint patches, and the start-up rows/columns not
 CM_TINTS = (5, 10, 15, 20, 30, 40)
 MIXED = ((20, 10, 10, 0), (5, 25, 30, 0), (40, 10, 0, 0), (10, 10, 10, 5), (0, 30, 30, 0))
 STRUCTURE_VISIBLE = 20.0
+ISSUE36_FINE = 0.0135          # issue 36: photo fine-scale error, halfway from vced to DBS
 
 
 # ------------------------------------------------------------------------------------------
@@ -197,13 +203,108 @@ def wideprint_methods() -> dict:
         return VCDiffuser(cmyk.shape[1], 4, modulation_noise(), table="ostromoukhov",
                           strength="ostromoukhov", next_boost=1.0).process(cmyk)
 
-    m = {name: ht(name) for name in ("vced", "vector", "fs", "jarvis", "stucki", "bluenoise", "bayer")}
+    m = {name: ht(name) for name in ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bluenoise", "bayer")}
     m["ostromoukhov"] = ostromoukhov
+    m["DBS"] = full_dbs(tone=False)            # issue 36: the bound, and dbs's own objective's
+    m["DBS tone"] = full_dbs(tone=True)
     # the screen before issue 18 (the 128 px mask, its old channel offsets), and the first
     # 256 px screen of issue 18 (now the modulation mask; today's channel layout)
     m["bluenoise128"] = _screen(load_bluenoise_mask(), mask_offsets(128, 4))
     m["bluenoise256"] = _screen(load_modulation_mask(), *screen_layout(256, 4))
     return m
+
+
+def _dbs_kernel():
+    """Direct binary search on a whole plane (numba, the bench only): h (H, W) uint8 dots,
+    improved in place; c (H, W) float64 ink 0..1; cpp the filter's autocorrelation (2 ry + 1,
+    2 rx + 1); toggles only where ``guard < 255 c < 255 - guard`` (guard < 0: everywhere),
+    swaps with the 8 neighbours where neither ink is 0 or 1.  Passes in scan order until
+    one changes nothing (at most ``passes``)."""
+    import numba
+
+    @numba.njit(cache=True)
+    def dbs_plane(h, c, cpp, passes, guard):
+        H, W = h.shape
+        ry, rx = cpp.shape[0] // 2, cpp.shape[1] // 2
+        cpe = np.zeros((H, W))
+
+        def stamp(y, x, a):
+            for dy in range(-ry, ry + 1):
+                yy = y + dy
+                if 0 <= yy < H:
+                    for dx in range(-rx, rx + 1):
+                        xx = x + dx
+                        if 0 <= xx < W:
+                            cpe[yy, xx] += a * cpp[dy + ry, dx + rx]
+        for y in range(H):
+            for x in range(W):
+                stamp(y, x, h[y, x] - c[y, x])
+        c0 = cpp[ry, rx]
+        for _ in range(passes):
+            changes = 0
+            for y in range(H):
+                for x in range(W):
+                    a0 = 1.0 - 2.0 * h[y, x]
+                    lv = c[y, x] * 255.0
+                    best = c0 + 2 * a0 * cpe[y, x] if guard < lv < 255 - guard else 0.0
+                    by, bx = -1, -1
+                    if 0 < lv < 255:
+                        for dy in range(-1, 2):
+                            for dx in range(-1, 2):
+                                yy, xx = y + dy, x + dx
+                                if (dy or dx) and 0 <= yy < H and 0 <= xx < W and h[yy, xx] != h[y, x] \
+                                        and 0 < c[yy, xx] < 1:
+                                    d = 2 * c0 - 2 * cpp[ry + dy, rx + dx] + 2 * a0 * (cpe[y, x] - cpe[yy, xx])
+                                    if d < best:
+                                        best, by, bx = d, yy, xx
+                    if best < -1e-12:
+                        changes += 1
+                        h[y, x] = 1 - h[y, x]
+                        stamp(y, x, a0)
+                        if by >= 0:
+                            h[by, bx] = 1 - h[by, bx]
+                            stamp(by, bx, -a0)
+            if changes == 0:
+                break
+    return dbs_plane
+
+
+def _autocorrelation(sigma: float, weight: float = 1.0) -> np.ndarray:
+    """The autocorrelation of the eye model's Gaussian (sigma px across, x ASPECT along; cut at
+    4 sigma), times ``weight``."""
+    from numpy.fft import fft2, ifft2
+    sx, sy = sigma, sigma * hvs.ASPECT
+    rx, ry = int(np.ceil(4 * sx)), int(np.ceil(4 * sy))
+    g = np.outer(np.exp(-np.arange(-ry, ry + 1) ** 2 / (2 * sy * sy)),
+                 np.exp(-np.arange(-rx, rx + 1) ** 2 / (2 * sx * sx)))
+    g /= g.sum()
+    p = np.zeros((4 * ry + 1, 4 * rx + 1))
+    p[:2 * ry + 1, :2 * rx + 1] = g
+    return weight * np.fft.fftshift(np.real(ifft2(np.abs(fft2(p)) ** 2)))
+
+
+def full_dbs(tone: bool):
+    """Whole-image DBS from vced's dots (see the module docstring): the fine filter alone
+    (the bound issue 36 quotes), or ``dbs``'s objective and tone guard (``tone``)."""
+    from wideprint.rip import dbs
+    from wideprint.rip.halftone import Halftoner
+    cpp = _autocorrelation(hvs.FINE)
+    if tone:
+        wide = _autocorrelation(hvs.COARSE, dbs.COARSE_WEIGHT)
+        oy, ox = (wide.shape[0] - cpp.shape[0]) // 2, (wide.shape[1] - cpp.shape[1]) // 2
+        wide[oy:oy + cpp.shape[0], ox:ox + cpp.shape[1]] += cpp
+        cpp = wide
+    guard = dbs.TONE_GUARD if tone else -1
+    kernel = _dbs_kernel()
+
+    def run(cmyk):
+        dots = Halftoner("vced", cmyk.shape[1], 4).process(cmyk)
+        for k in range(4):
+            plane = np.ascontiguousarray(dots[:, :, k])
+            kernel(plane, cmyk[:, :, k] / 255.0, np.ascontiguousarray(cpp), 30, guard)
+            dots[:, :, k] = plane
+        return dots
+    return run
 
 
 def mask_levels() -> list[tuple[str, float, float]]:
@@ -319,7 +420,7 @@ def score(run, inputs) -> dict:
     sheet, where = inputs["tints"]
     dots = run(sheet)
     co, lf, st, tone = [], [], [], []
-    for t, v, y, x in where:
+    for _t, v, y, x in where:
         patch = dots[y + START:y + CELL, x + START:x + CELL, 0]
         co.append(hvs.rmse(patch, np.full(patch.shape, v / 255), hvs.COARSE, margin=16))
         lf.append(hvs.lf_share(patch))
@@ -434,6 +535,24 @@ def print_targets(res: dict) -> None:
             print(f"  {name}: C/M overlap in equal light tints {res[name]['cm_overlap']:.2f} x independent "
                   f"(vced {res['vced']['cm_overlap']:.2f}, fs {res['fs']['cm_overlap']:.2f}): "
                   f"{verdict(res[name]['cm_overlap'] <= 0.5)}")
+    d, v, b = res.get("dbs"), res.get("vced"), res.get("DBS")
+    if d and v:
+        print()
+        print("targets (issue 36, part 4)")
+        print(f"  dbs photo fine <= 0.0135 (the issue's figure): {d['photo_fine']:.5f}: "
+              f"{verdict(d['photo_fine'] <= ISSUE36_FINE)}")
+        if b:
+            half = (v["photo_fine"] + b["photo_fine"]) / 2
+            print(f"  dbs photo fine at least halfway from vced ({v['photo_fine']:.5f}) to DBS "
+                  f"({b['photo_fine']:.5f}) as measured here, <= {half:.5f}: "
+                  f"{verdict(d['photo_fine'] <= half)} "
+                  f"({(v['photo_fine'] - d['photo_fine']) / (v['photo_fine'] - b['photo_fine']):.0%} of the way)")
+        print(f"  dbs photo coarse no worse than vced's ({d['photo_coarse']:.5f} vs {v['photo_coarse']:.5f}): "
+              f"{verdict(d['photo_coarse'] <= v['photo_coarse'])}")
+        print(f"  dbs: tone within 0.5 % on every tint and 64-row block ({d['tone']:.2f} %): "
+              f"{verdict(d['tone'] <= 0.5)}")
+        print(f"  dbs: no periodic structure in the tints 1-99 % (largest peak {d['tint_struct']:.0f} at "
+              f"{d['struct_at']} %): {verdict(d['tint_struct'] < STRUCTURE_VISIBLE)}")
     if res.get("vector") and res.get("vced"):
         print(f"  vector: mixed-tint grain below vced's ({res['vector']['mix_grain']:.5f} vs "
               f"{res['vced']['mix_grain']:.5f}): {verdict(res['vector']['mix_grain'] < res['vced']['mix_grain'])}")
@@ -444,6 +563,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", choices=("wideprint", "peers"))
     ap.add_argument("--keep", metavar="DIR", help="work in DIR and keep the peers' files")
     ap.add_argument("--quick", action="store_true", help="one photo, no enlargement (a smoke run)")
+    ap.add_argument("--methods", help="only these of wideprint's methods and references (comma-separated)")
+    ap.add_argument("--json", metavar="PATH", help="also write the scores as JSON (bench/results/)")
     args = ap.parse_args(argv)
     work = args.keep or tempfile.mkdtemp(prefix="quality_bench_", dir="/tmp")
     os.makedirs(work, exist_ok=True)
@@ -468,6 +589,9 @@ def main(argv=None) -> int:
         methods = {}
         if args.only != "peers":
             methods.update(wideprint_methods())
+        if args.methods:
+            keep = args.methods.split(",")
+            methods = {k: v for k, v in methods.items() if k in keep}
         if args.only != "wideprint":
             methods.update(peer_methods(work))
         results = {}
@@ -483,6 +607,14 @@ def main(argv=None) -> int:
         for name, c, f in mask_levels():
             print(f"  {name:28s} {c:9.5f} {f:9.5f}")
         print_targets(results)
+        if args.json:
+            import json
+            with open(args.json, "w") as f:
+                json.dump({"date": time.strftime("%Y-%m-%d %H:%M"), "photos": source,
+                           "hvs": {"fine": hvs.FINE, "coarse": hvs.COARSE, "aspect": hvs.ASPECT},
+                           "results": {k: None if v is None else {n: float(x) for n, x in v.items()}
+                                       for k, v in results.items()}}, f, indent=1)
+                f.write("\n")
     finally:
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)

@@ -49,7 +49,7 @@ def test_print_rip_and_preview_run_without_numba(tmp_path):
     code = f"""
 import sys
 from wideprint.app.cli import main
-for d in ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise"):
+for d in ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise"):
     for p in ("1", "2"):
         assert not main(["print", {str(SAMPLE)!r}, "--device", "emulator", "--dither", d,
                          "--passes", p, "--media-out", {str(tmp_path / "m.tif")!r},
@@ -74,7 +74,7 @@ def test_compiled_and_jit_kernels_land_the_same_dots(tmp_path):
 import sys
 from wideprint.app import api
 out = sys.argv[1]
-for d in ("vced", "vector", "fs", "jarvis", "stucki", "bayer", "bluenoise"):
+for d in ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise"):
     for p in (1, 4):
         r = api.print_file(IMG, dither=d, passes=p, size="pixels", media_out=f"{out}-{d}-{p}.tif")
         assert r.ok, r.message
