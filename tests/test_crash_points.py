@@ -13,6 +13,8 @@ import socket
 import sqlite3
 import subprocess
 import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -32,10 +34,21 @@ FINAL = ("done", "failed", "cancelled")
 
 
 # -- processes -----------------------------------------------------------------------------------
+_PORTS_TAKEN: set[int] = set()
+_PORTS_LOCK = threading.Lock()
+
+
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A free port no other Emulator of this run holds (scenarios run two at once, and a
+    power-cycled printer's ports are free while it is off)."""
+    with _PORTS_LOCK:
+        while True:
+            with socket.socket() as s:
+                s.bind(("127.0.0.1", 0))
+                port = s.getsockname()[1]
+            if port not in _PORTS_TAKEN:
+                _PORTS_TAKEN.add(port)
+                return port
 
 
 class Emulator:
@@ -171,6 +184,37 @@ def _run(tmp_path, job_file, point_id, printer):
     return held, prints
 
 
+#: the printer each test function runs its scenarios with
+PRINTER = {"test_in_process_printer": "in-process",
+           "test_standalone_printer_outlives_the_server": "standalone",
+           "test_standalone_printer_power_cycled_while_the_server_was_down": "power-cycled"}
+
+
+@pytest.fixture(scope="module")
+def scenarios(request, tmp_path_factory, job_file):
+    """Every (printer, point) scenario of this run's tests, started on two threads when the
+    first test needs one: a scenario is processes (the server, a standalone printer) that
+    this process mostly waits on, so one at a time left a core idle; two at once keep both
+    busy.  Each test takes its own scenario's outcome (or the exception it raised) and
+    checks it; the scenarios share nothing but the job's file (read only) and get ports no
+    other holds (free_port)."""
+    wanted = [(PRINTER[item.originalname], item.callspec.params["point_id"])
+              for item in request.session.items
+              if item.module is request.module and item.originalname in PRINTER]
+    pool = ThreadPoolExecutor(2, thread_name_prefix="scenario")
+    futures = {}
+    for printer, point_id in wanted:
+        tmp = tmp_path_factory.mktemp(f"{printer}-{point_id.replace(':', '-')}")
+        futures[printer, point_id] = pool.submit(_run, tmp, job_file, point_id, printer)
+    yield futures
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def outcome(scenarios, printer: str, point_id: str):
+    """(held, prints) of the scenario, once it ended; its own AssertionError if it failed."""
+    return scenarios[printer, point_id].result(timeout=900)
+
+
 # What each printer must lead to: the in-process printer dies with the server, so a copy
 # caught part-way is held (its strokes are on a sheet the new printer knows nothing of);
 # a printer that outlives the server confirms the sheet and the job simply goes on.
@@ -178,15 +222,15 @@ MID_COPY = ("checkpoint:3", "checkpoint:copy2")
 
 
 @pytest.mark.parametrize("point_id", POINT_IDS)
-def test_in_process_printer(tmp_path, job_file, point_id):
-    held, prints = _run(tmp_path, job_file, point_id, "in-process")
+def test_in_process_printer(scenarios, point_id):
+    held, prints = outcome(scenarios, "in-process", point_id)
     assert held == (point_id in MID_COPY)
     assert any(p["outcome"] == "interrupted" for p in prints) == (point_id in MID_COPY)
 
 
 @pytest.mark.parametrize("point_id", POINT_IDS)
-def test_standalone_printer_outlives_the_server(tmp_path, job_file, point_id):
-    held, prints = _run(tmp_path, job_file, point_id, "standalone")
+def test_standalone_printer_outlives_the_server(scenarios, point_id):
+    held, prints = outcome(scenarios, "standalone", point_id)
     assert not held
     assert not any(p["outcome"] == "interrupted" for p in prints)
     if point_id in MID_COPY:
@@ -194,6 +238,6 @@ def test_standalone_printer_outlives_the_server(tmp_path, job_file, point_id):
 
 
 @pytest.mark.parametrize("point_id", ["checkpoint:3", "job_end:1", "checkpoint:copy2"])
-def test_standalone_printer_power_cycled_while_the_server_was_down(tmp_path, job_file, point_id):
-    held, prints = _run(tmp_path, job_file, point_id, "power-cycled")
+def test_standalone_printer_power_cycled_while_the_server_was_down(scenarios, point_id):
+    held, prints = outcome(scenarios, "power-cycled", point_id)
     assert held == (point_id in MID_COPY)
