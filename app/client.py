@@ -260,6 +260,10 @@ class Client:
         return self.request("POST", f"/v1/jobs/{job_id}/release",
                             body={"force": True} if force else None)["job"]
 
+    def rip_hold(self, job_id: int) -> dict:
+        """Hold a job not yet started and RIP it ahead: its release prints the kept planes."""
+        return self.request("POST", f"/v1/jobs/{job_id}/rip-hold", body=None)["job"]
+
     def fit(self, job_id: int) -> dict:
         return self.request("GET", f"/v1/jobs/{job_id}/fit")
 

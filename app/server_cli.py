@@ -296,7 +296,7 @@ def cmd_submit(args) -> int:
             r = client.submit(f, preset=args.preset, copies=args.copies, priority=args.priority,
                               hold=args.hold or None, settings=_settings_from(args) or None,
                               client=args.client, printer=args.printer,
-                              force=args.force or None)
+                              force=args.force or None, rip_hold=args.rip_hold or None)
             job = r["job"]
             results.append(job)
             if not args.json:
@@ -379,6 +379,8 @@ def _job_action(what: str):
                             continue
                     elif what == "release" and args.force:
                         job = client.release(job_id, force=True)
+                    elif what == "hold" and args.rip:
+                        job = client.rip_hold(job_id)
                     else:
                         job = client.action(job_id, what)
                     print(f"job {job['id']}: {job['state']}"
@@ -750,6 +752,8 @@ def add_parser(sub) -> None:
                    "preset's hold)")
     p.add_argument("--force", action="store_true", help="queue it even if it does not fit the "
                    "paper loaded (too wide, longer than the roll left)")
+    p.add_argument("--rip-hold", action="store_true", help="queue it held and RIP it ahead: "
+                   "its release prints the kept planes without ripping again")
     p.add_argument("--client", help="a tag for the accounting (default: none)")
     p.add_argument("--printer", metavar="NAME", help="the printer to print on (default: any, the "
                    "first free one)")
@@ -776,6 +780,9 @@ def add_parser(sub) -> None:
         if name == "release":
             p.add_argument("--force", action="store_true", help="past the fit checks (a job "
                            "held because the roll is too short: the operator knows better)")
+        if name == "hold":
+            p.add_argument("--rip", action="store_true", help="and RIP them ahead: their "
+                           "release prints the kept planes without ripping again")
         if name == "cancel":
             p.add_argument("--timeout", type=float, default=60.0, metavar="S",
                            help="wait at most this long for a printing job to stop (default "

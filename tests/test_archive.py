@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from support.images import random_planes, write_cmyk_tiff
+from support.server import wait_for
 from wideprint.app.client import ApiError, Client
 from wideprint.app.server import archive
 from wideprint.app.server.spool import Spool
@@ -131,3 +132,42 @@ def test_a_done_job_is_reprinted_bit_exact_and_with_changed_settings(shop, tmp_p
     with pytest.raises(ApiError) as e:
         c.reprint(first["id"])
     assert e.value.status == 410 and "poster.tif" in str(e.value)
+
+
+def test_rip_and_hold_prints_the_kept_planes_bit_exact(shop, tmp_path, caplog):
+    """Ripped ahead while held, a job's release prints its kept planes (not ripped again),
+    bit-exact with the same job ripped at its release; an edit makes them stale; they go
+    when the job ends (docs/server.md "RIP and hold")."""
+    import logging
+    caplog.set_level(logging.INFO, logger="wideprint.server")
+    s, c = shop
+    planes = random_planes(260, 300, seed=21)
+    src = write_cmyk_tiff(tmp_path / "approved.tif", planes)
+    plain = c.submit(src, hold=True, settings={"passes": 2})["job"]
+    ahead = c.submit(src, rip_hold=True, settings={"passes": 2})["job"]
+    assert ahead["state"] == "held" and ahead["rip_hold"] == 1
+    ready = wait_for(lambda: (c.job(ahead["id"]).get("ripped") or {}).get("ready") and
+                     c.job(ahead["id"])["ripped"], 60, what="the planes ripped ahead")
+    assert ready["rip_s"] > 0 and ready["bytes"] > 0 and "path" not in ready
+    kept = list((s.state_dir / "ripped").iterdir())
+    assert len(kept) == 1 and np.array_equal(read_planes(kept[0]), planes)
+    # a job marked later, then edited: its planes are made again for the new settings
+    later = c.submit(src, hold=True)["job"]
+    c.request("POST", f"/v1/jobs/{later['id']}/rip-hold")
+    first = wait_for(lambda: c.job(later["id"]).get("ripped"), 60, what="ripped")
+    c.edit(later["id"], settings={"passes": 4})
+    wait_for(lambda: len(list((s.state_dir / "ripped").iterdir())) == 2 and
+             c.job(later["id"])["ripped"]["rip_s"] != first["rip_s"], 60, what="ripped again")
+    for job in (plain, ahead, later):
+        c.action(job["id"], "release")
+        assert c.wait(job["id"], 60)["state"] == "done"
+    used = [r.getMessage() for r in caplog.records if "printing its planes" in r.getMessage()]
+    assert used == [f"job {ahead['id']}: printing its planes, ripped ahead",
+                    f"job {later['id']}: printing its planes, ripped ahead"], used
+    media = s.root / "media"
+    for job in (plain, ahead, later):
+        assert np.array_equal(read_planes(media / f"job-{job['id']}.tif"), planes)
+    assert list((s.state_dir / "ripped").iterdir()) == []            # gone with the jobs
+    with pytest.raises(ApiError) as e:
+        c.request("POST", f"/v1/jobs/{ahead['id']}/rip-hold")
+    assert e.value.status == 409 and "only a job not yet started" in str(e.value)

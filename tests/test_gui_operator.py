@@ -462,3 +462,25 @@ def test_the_roll_on_the_card_and_a_job_it_cannot_hold_is_held(qtbot, shop_win, 
         str(shop_win.queue_model.data(shop_win.queue_model.index(row, c)))
         for c in range(shop_win.queue_model.columnCount()))
     assert "needs" in shown, shown
+
+
+def test_rip_and_hold_from_the_gui(qtbot, shop_win, shop, tmp_path):
+    """Jobs > RIP and hold: the job is held and ripped ahead (its row says so); released, it
+    prints its kept planes, bit-exact."""
+    from wideprint.rip.planes import read_planes
+    a, planes = image(tmp_path, "proof-ok.tif", 75, rows=200, cols=200)
+    job = shop.client.submit(a, hold=True)["job"]
+    qtbot.waitUntil(lambda: any(j["id"] == job["id"] for j in shop_win.queue_model.jobs),
+                    timeout=20_000)
+    select(shop_win, ["proof-ok.tif"])
+    shop_win._update_actions()
+    assert shop_win.actions_["rip_hold"].isEnabled()
+    shop_win.actions_["rip_hold"].trigger()
+    row = lambda: shop_win.queue_model.row_of(job["id"])  # noqa: E731
+    state = lambda: shop_win.queue_model.data(shop_win.queue_model.index(row(), 3))  # noqa: E731
+    qtbot.waitUntil(lambda: row() >= 0 and state() == "held, ripped", timeout=LONG)
+    shop.client.pause_queue(False)
+    shop_win.actions_["release"].trigger()
+    qtbot.waitUntil(lambda: shop.client.job(job["id"])["state"] == "done", timeout=LONG)
+    assert np.array_equal(read_planes(shop.media / f"job-{job['id']}.tif"), planes)
+    assert "printing its planes, ripped ahead" in (shop.root / "server.out").read_text()

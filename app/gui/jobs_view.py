@@ -28,6 +28,11 @@ def state_text(job: dict) -> str:
         return "stopped: printer fault"
     if st == "held" and "held before printing" in (job.get("message") or ""):
         return "held: roll too short"          # the worker's roll check (docs/server.md "Rolls")
+    if st == "held" and job.get("rip_hold"):   # RIP and hold (docs/server.md)
+        ripped = job.get("ripped") or {}
+        if ripped.get("error"):
+            return "held (RIP failed)"
+        return "held, ripped" if ripped.get("ready") else "held, ripping"
     if st == "queued" and job.get("interrupted"):
         return "queued, part-way"
     if st == "printing" and job.get("copies", 1) > 1:

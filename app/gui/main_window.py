@@ -288,6 +288,9 @@ class MainWindow(QMainWindow):
         self._action("hold", "Hold", lambda: self._each("hold"), "Ctrl+H", S.SP_MediaPause,
                      "Keep the selected jobs from printing until released")
         self._action("release", "Release", lambda: self._each("release"), "Ctrl+R", S.SP_MediaPlay)
+        self._action("rip_hold", "RIP and hold", lambda: self._each("rip-hold"), None, None,
+                     "Hold the selected jobs and RIP them now: their release prints at once, "
+                     "without ripping again")
         self._action("requeue", "Requeue", lambda: self._each("requeue"), None, S.SP_BrowserReload,
                      "Print the selected failed or cancelled jobs again (History)")
         self._action("reprint", "Reprint", self.reprint_selected, "Ctrl+P", S.SP_FileDialogNewFolder,
@@ -315,8 +318,8 @@ class MainWindow(QMainWindow):
         a = self.actions_
         for title, keys in (("&File", ("add", None, "quit")),
                             ("&Edit", ("undo",)),
-                            ("&Jobs", ("hold", "release", "cancel", "requeue", "reprint", None,
-                                       "up", "down")),
+                            ("&Jobs", ("hold", "rip_hold", "release", "cancel", "requeue",
+                                       "reprint", None, "up", "down")),
                             ("&Printers", ("pause_all", "resume_all", None, "estop"))):
             m = mb.addMenu(title)
             m.setObjectName(f"menu_{title.strip('&').lower()}")
@@ -1016,6 +1019,8 @@ class MainWindow(QMainWindow):
         states = {j["state"] for j in jobs}
         a = self.actions_
         a["hold"].setEnabled("queued" in states)
+        a["rip_hold"].setEnabled(any(j["state"] in ("queued", "held") and not self._started(j)
+                                     and not j.get("rip_hold") for j in jobs))
         a["release"].setEnabled(any(j["state"] == "held" and not j.get("fault") for j in jobs))
         a["requeue"].setEnabled(bool(states & {"failed", "cancelled"}))
         a["reprint"].setEnabled(bool(states & {"done", "failed", "cancelled"}))

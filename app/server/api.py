@@ -737,6 +737,11 @@ class ApiHandler(BaseHTTPRequestHandler):
                     if owner is not None:
                         self.server.owners.set(new["id"], owner)
                     return self._json(201, self._job(new))
+                if method == "POST" and len(route) == 3 and route[2] == "rip-hold":
+                    if body:                           # docs/server.md "RIP and hold"
+                        raise Invalid("rip-hold takes no parameters")
+                    self._may_act(job_id, "rip and hold")
+                    return self._json(200, self._job(self.srv.rip_hold(job_id)))
                 if method == "POST" and len(route) == 3 and route[2] == "release" and body:
                     if not isinstance(body, dict) or set(body) != {"force"} or \
                             not isinstance(body["force"], bool):
@@ -893,7 +898,7 @@ class ApiHandler(BaseHTTPRequestHandler):
                 settings=req["settings"], preset=req["preset"], copies=req["copies"],
                 priority=req["priority"], hold=req["hold"] if "hold" in raw else None,
                 key=req["key"], client=req["client"], printer=req["printer"],
-                force=req["force"], fit=True)
+                force=req["force"], rip_hold=req["rip_hold"], fit=True)
         except Invalid as exc:
             self.close_connection = True
             return self._error(exc.status, str(exc), close=True)

@@ -41,6 +41,7 @@ from .config import (CHUNK, IMAGE_SUFFIXES, MAX_COPIES, PRIORITY_RANGE, SERVER_F
 from .hotfolders import HotFolders
 from .presets import Presets
 from .previews import Previews
+from .ripped import Ripper, clean as clean_planes
 from .rolls import Rolls, paper_per_copy_mm, short_of_roll
 from .sdnotify import notify
 from . import crashpoints, fsck
@@ -84,6 +85,7 @@ class PrintServer:
         self.workers = {p.name: Worker(self, p, self.profiles[p.name]) for p in self.printer_configs}
         self.worker = next(iter(self.workers.values()))     # the first printer
         self.hot = HotFolders(self, Path(config.hot_folder_root)) if config.hot_folder_root else None
+        self.ripper = Ripper(self)              # RIP and hold (docs/server.md)
         self.previews = Previews(self)
         self._widths: dict = {}                 # job_width_mm's cache
         handler = type("Handler", (ApiHandler,), {"srv": self})
@@ -168,6 +170,7 @@ class PrintServer:
                 fsck.remove_copy(path)
             except OSError:
                 pass
+        clean_planes(self.state_dir, self.spool.planes_in_use())
 
     def request_stop(self) -> None:
         """An authorised client asked the server to stop (the GUI that started it, when it
@@ -209,6 +212,7 @@ class PrintServer:
     def start(self) -> None:
         for w in self.workers.values():
             w.start()
+        self.ripper.start()
         self._http_thread.start()
         if self.hot:
             self.hot.start()
@@ -228,6 +232,7 @@ class PrintServer:
         if self._stopped.is_set():
             return
         self._stopped.set()
+        self.ripper.stop()
         if self.hot:
             self.hot.stopping.set()
         for w in self.workers.values():
@@ -318,6 +323,11 @@ class PrintServer:
     # -- operations (API) -----------------------------------------------------------------------
     def public(self, job: dict, positions: dict | None = None) -> dict:
         d = {k: v for k, v in job.items() if k not in ("spool_path", "checkpoint", "key")}
+        info = job.get("ripped")
+        if info:                                   # RIP and hold: ready or why not, no paths
+            d["ripped"] = dict(ready=bool(info.get("path")) and not info.get("error"),
+                               error=info.get("error"), rip_s=info.get("rip_s"),
+                               bytes=info.get("bytes"))
         cp = job.get("checkpoint")
         d["next_stroke"] = cp.get("next_stroke") if cp else None
         if positions is not None:
@@ -539,9 +549,18 @@ class PrintServer:
         return job
 
     def notify(self) -> None:
-        """Wake every printer's worker (a job was queued or released)."""
+        """Wake every printer's worker (a job was queued or released), and the ripper."""
         for w in self.workers.values():
             w.notify()
+        ripper = getattr(self, "ripper", None)
+        if ripper is not None:
+            ripper.notify()
+
+    def rip_hold(self, job_id: int) -> dict:
+        """POST /v1/jobs/ID/rip-hold: held, and ripped ahead (docs/server.md "RIP and hold")."""
+        job = self.spool.rip_hold(job_id)
+        self.notify()
+        return job
 
     def printer_worker(self, name: str) -> Worker:
         w = self.workers.get(name)

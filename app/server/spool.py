@@ -61,7 +61,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     nest_members TEXT,                        -- JSON [ids]: the jobs nested on this job's sheet
     nested_in    INTEGER,                     -- printed on that job's sheet (a nest member)
     force        INTEGER NOT NULL DEFAULT 0,  -- 1: the operator overrode the fit checks
-    reprint_of   INTEGER                      -- the archived job this one reprints
+    reprint_of   INTEGER,                     -- the archived job this one reprints
+    rip_hold     INTEGER NOT NULL DEFAULT 0,  -- 1: RIP it while held (ripped.py)
+    ripped       TEXT                         -- JSON: its kept planes (path, key, size ...)
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -123,7 +125,9 @@ ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("jobs", "reprint_of", "INTEGER"),
                  ("prints", "printer", "TEXT"),
                  ("prints", "media", "TEXT"),
-                 ("prints", "paper_mm", "REAL NOT NULL DEFAULT 0"))
+                 ("prints", "paper_mm", "REAL NOT NULL DEFAULT 0"),
+                 ("jobs", "rip_hold", "INTEGER NOT NULL DEFAULT 0"),
+                 ("jobs", "ripped", "TEXT"))
 # columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
 # carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
 RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
@@ -158,6 +162,8 @@ def _job_dict(row: sqlite3.Row) -> dict:
     if cp is not None and "next_pass" in cp and "next_stroke" not in cp:
         cp["next_stroke"] = cp.pop("next_pass")      # saved by schema 2: the same number
     d["interrupted"] = bool(d["interrupted"])
+    if d.get("ripped"):
+        d["ripped"] = json.loads(d["ripped"])
     return d
 
 
@@ -245,7 +251,7 @@ class Spool:
                 settings: dict, preset: str | None = None, copies: int = 1, priority: int = 0,
                 hold: bool = False, key: str | None = None, client: str | None = None,
                 hot_path: str | None = None, printer: str | None = None, force: int = 0,
-                reprint_of: int | None = None) -> tuple[dict, bool]:
+                reprint_of: int | None = None, rip_hold: int = 0) -> tuple[dict, bool]:
         """Queue a job; returns (job, created).  With a key already used the existing job
         is returned (created False): a client's retry never makes a second job.  force: the
         operator overrode the fit checks (docs/server.md "Fit before it fails");
@@ -258,11 +264,11 @@ class Spool:
             cur = c.execute(
                 "INSERT INTO jobs (key, name, source, client, spool_path, size, sha256, preset,"
                 " settings, copies, priority, state, hot_path, submitted, printer, force,"
-                " reprint_of) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " reprint_of, rip_hold) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (key, name, source, client, spool_path, size, sha256, preset,
                  json.dumps(settings, sort_keys=True), copies, priority,
-                 "held" if hold else "queued", hot_path, time.time(), printer, int(force),
-                 reprint_of))
+                 "held" if hold or rip_hold else "queued", hot_path, time.time(), printer,
+                 int(force), reprint_of, int(bool(rip_hold))))
             row = c.execute("SELECT * FROM jobs WHERE id=?", (cur.lastrowid,)).fetchone()
         return _job_dict(row), True
 
@@ -493,6 +499,40 @@ class Spool:
                 return None
             return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
 
+    def rip_hold(self, job_id: int) -> dict:
+        """RIP and hold (docs/server.md "RIP and hold"): a job not yet started is held and
+        marked to be ripped ahead; its planes are kept for its release."""
+        with self.tx() as c:
+            job = self._get_for_change(c, job_id)
+            started = job["interrupted"] or job["checkpoint"] is not None or job["fault"]
+            if job["state"] not in ("queued", "held") or started:
+                raise SpoolError(f"job {job_id} is {job['state']}"
+                                 + (" part-way" if started and job["state"] != "printing" else "")
+                                 + ": only a job not yet started can be ripped and held")
+            if job["nest_members"] or (job["settings"].get("placement") or {}).get("nest"):
+                raise SpoolError(f"job {job_id} is nested with others: its sheet is ripped "
+                                 f"when it prints")
+            c.execute("UPDATE jobs SET state='held', rip_hold=1 WHERE id=?", (job_id,))
+            return _job_dict(c.execute("SELECT * FROM jobs WHERE id=?", (job_id,)).fetchone())
+
+    def rip_hold_jobs(self) -> list[dict]:
+        """The held jobs to rip ahead (ripped.py's Ripper), oldest first."""
+        rows = self.db.execute("SELECT * FROM jobs WHERE state='held' AND rip_hold=1 AND "
+                               "fault='' AND spool_path IS NOT NULL AND nested_in IS NULL "
+                               "ORDER BY id").fetchall()
+        return [_job_dict(r) for r in rows]
+
+    def set_ripped(self, job_id: int, info: dict) -> dict | None:
+        """A job's kept planes recorded: the ones they replace ({} if none), or None when
+        the job is no longer waiting (the caller deletes the new planes)."""
+        with self.tx() as c:
+            row = c.execute("SELECT ripped FROM jobs WHERE id=? AND state IN ('queued','held')",
+                            (job_id,)).fetchone()
+            if row is None:
+                return None
+            c.execute("UPDATE jobs SET ripped=? WHERE id=?", (json.dumps(info), job_id))
+            return json.loads(row[0]) if row[0] else {}
+
     def release(self, job_id: int, force: bool = False) -> dict:
         """held -> queued; force: the operator overrides the fit checks for it (a roll that
         holds more than the server knows, a job meant to run over the edge)."""
@@ -655,6 +695,16 @@ class Spool:
         return {r[0] for r in self.db.execute(
             "SELECT hot_path FROM jobs WHERE hot_path IS NOT NULL AND state IN "
             "('queued','held','printing')")}
+
+    def planes_in_use(self) -> set[str]:
+        """The kept planes of the jobs still waiting or printing (RIP and hold)."""
+        out = set()
+        for (info,) in self.db.execute("SELECT ripped FROM jobs WHERE ripped IS NOT NULL AND "
+                                       "state IN ('queued','held','printing')"):
+            path = json.loads(info).get("path")
+            if path:
+                out.add(path)
+        return out
 
     def spool_files_in_use(self) -> set[str]:
         return {r[0] for r in self.db.execute(

@@ -102,7 +102,7 @@ def job_rip_settings(settings: dict, profile, state_dir: Path):
 
 
 JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer",
-            "force"}
+            "force", "rip_hold"}
 
 
 def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
@@ -138,6 +138,10 @@ def validate_job_request(raw, presets: dict, profile, icc_dir: Path | None,
     if not isinstance(force, bool):
         raise Invalid("force must be true or false")
     req["force"] = force
+    rip_hold = raw.get("rip_hold", False)       # held, ripped ahead (docs/server.md)
+    if not isinstance(rip_hold, bool):
+        raise Invalid("rip_hold must be true or false")
+    req["rip_hold"] = rip_hold
     for k, limit in (("key", 200), ("client", 100)):
         v = raw.get(k)
         if v is not None and (not isinstance(v, str) or not 0 < len(v) <= limit or

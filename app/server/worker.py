@@ -11,9 +11,11 @@ import logging
 import os
 import threading
 import time
+from typing import Any
 
 from . import crashpoints, fsck
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
+from .ripped import planes_job
 from .spool import COLORS, disk_full
 from .validate import job_rip_settings
 
@@ -570,9 +572,15 @@ class Worker(threading.Thread):
             try:
                 rs, media_profile = job_rip_settings(job["settings"], self.profile,
                                                      self.srv.state_dir)
-                rip = RipJob(job["spool_path"], rs, media_profile,
-                             more=tuple(m["spool_path"] for m in members),
-                             names=(job["name"], *(m["name"] for m in members)))
+                # ripped ahead (RIP and hold) and still the job's: printed from its planes
+                rip: Any = None if members or rs.placement.marks == "cut" else \
+                    planes_job(job, self.profile, rs, media_profile)
+                if rip is not None:
+                    log.info("job %s: printing its planes, ripped ahead", job_id)
+                else:
+                    rip = RipJob(job["spool_path"], rs, media_profile,
+                                 more=tuple(m["spool_path"] for m in members),
+                                 names=(job["name"], *(m["name"] for m in members)))
                 layout = rip.layout.report if rip.layout is not None else None
                 if rs.placement.marks == "cut" and cp is None:     # print and cut (docs/cut.md)
                     from ...rip.cut import write_cut_files
@@ -757,6 +765,12 @@ class Worker(threading.Thread):
                       f"job {job['id']}'s end")
         crashpoints.reached("finish")
         self._cancel.discard(job["id"])
+        planes = (job.get("ripped") or {}).get("path")
+        if planes:                                 # RIP and hold: the kept planes go with it
+            try:
+                os.unlink(planes)
+            except OSError:
+                pass
         if not keep:
             for j in (*members, job):
                 if j.get("spool_path"):
