@@ -224,7 +224,7 @@ def test_the_media_attributes_follow_the_paper_the_printer_measured(tmp_path):
         src = tmp_path / "strip.tif"
         write_cmyk_tiff(src, random_planes(40, 60, seed=3))
         job = serve.client.submit(src, name="strip.tif")["job"]
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 300             # a busy machine's first compile
         while serve.client.job(job["id"])["state"] not in ("done", "failed"):
             assert time.monotonic() < deadline, "the job did not end"
             time.sleep(0.2)
@@ -256,7 +256,7 @@ def test_the_media_attributes_follow_the_paper_the_printer_measured(tmp_path):
         a = ready_length(lambda y: y == 5000000)
         assert_roll(a, 3000, 50000)
         job = serve.client.submit(src, name="strip2.tif")["job"]
-        end = time.monotonic() + 120
+        end = time.monotonic() + 300
         while serve.client.job(job["id"])["state"] not in ("done", "failed"):
             assert time.monotonic() < end, "the job did not end"
             time.sleep(0.2)

@@ -107,6 +107,9 @@ def test_a_login_gives_an_httponly_strict_cookie_and_a_wrong_token_nothing(shop)
     flags = {f.strip() for f in cookie.split(";")[1:]}
     assert {"HttpOnly", "SameSite=Strict", "Path=/"} <= flags, cookie
     assert shop.token not in cookie and shop.token not in json.dumps(body)
+    assert "Secure" not in flags                     # plain HTTP: a Secure cookie would not come back
+    _, behind_tls, _ = login(shop, shop.token, headers={"X-Forwarded-Proto": "https"})
+    assert "Secure" in {f.strip() for f in behind_tls.split(";")}
     # the cookie reads the API; a change needs the session's CSRF value too
     assert request(shop, "GET", "/v1/status", headers={"Cookie": sid})[0] == 200
     s, _, _ = request(shop, "POST", "/v1/queue", {"paused": False}, {"Cookie": sid})
@@ -284,9 +287,11 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
         assert "<i>second.tif" in driver.execute_script(
             "return document.querySelector(arguments[0]).innerText", sel)
         assert not driver.find_elements(By.CSS_SELECTOR, "#queue td.name i")
-        wait.until(lambda d: d.execute_script(
+        # its thumbnail: the server's halftone preview (numba's first compile on a busy
+        # machine can take a minute; the compiled kernels of `make` take a second)
+        WebDriverWait(driver, 180, poll_frequency=0.1).until(lambda d: d.execute_script(
             "const i = document.querySelector(arguments[0] + ' img'); "
-            "return i && i.complete && i.naturalWidth > 0", sel))        # its thumbnail
+            "return i && i.complete && i.naturalWidth > 0", sel))
         # hold it with its button, then release it
         click(driver, f"{sel} button[data-action='hold']")
         wait.until(lambda d: attr(d, sel, "data-state") == "held")

@@ -837,7 +837,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                 return self._json(401, {"error": "wrong token"}, extra=extra)
             sid, s, who = made
             log.info("api %s: %s signed in to the web page", address, who.shown())
-            extra["Set-Cookie"] = web.cookie(sid)
+            extra["Set-Cookie"] = web.cookie(
+                sid, secure=(self.headers.get("X-Forwarded-Proto") or "").lower() == "https")
             return self._json(200, {"name": who.name, "role": who.role, "csrf": s.csrf},
                               extra=extra)
         except (Invalid, ValueError) as exc:

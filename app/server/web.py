@@ -203,8 +203,10 @@ class Sessions:
             return len(self._by_id)
 
 
-def cookie(sid: str, clear: bool = False) -> str:
+def cookie(sid: str, clear: bool = False, secure: bool = False) -> str:
     """The Set-Cookie value: HttpOnly, SameSite=Strict, the whole site; a session cookie
-    (gone when the browser closes), or one that deletes it."""
-    tail = "; Max-Age=0" if clear else ""
+    (gone when the browser closes), or one that deletes it.  `secure`: the page was
+    reached over HTTPS (a TLS proxy in front says `X-Forwarded-Proto: https`), so the
+    browser is told never to send the cookie over plain HTTP."""
+    tail = ("; Max-Age=0" if clear else "") + ("; Secure" if secure else "")
     return f"{COOKIE}={'' if clear else sid}; Path=/; HttpOnly; SameSite=Strict{tail}"
