@@ -255,8 +255,9 @@ class IppServe:
         self._log.close()
 
 
-def wait_job(client, name: str, timeout: float = 120) -> dict:
-    """The wideprint job of that name, once it has ended."""
+def wait_job(client, name: str, timeout: float = 240) -> dict:
+    """The wideprint job of that name, once it has ended (the limit is for a machine so busy
+    that numba's first compile in a new server takes minutes; a job ends in seconds)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         jobs = [j for j in client.jobs("done,failed,cancelled,queued,held,printing")

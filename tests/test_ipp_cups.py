@@ -170,12 +170,12 @@ def test_a_driverless_queue_passes_jpeg_through_and_tiff_only_raw(plain_cups, sh
         assert r.returncode != 0 and 'Unsupported document-format "image/tiff"' in r.stderr, \
             r.stdout + r.stderr
     lp(plain_cups, "plotter1", tif, "-o", "raw")
-    job = wait_job(serve.client, "poster.jpg", timeout=60)
+    job = wait_job(serve.client, "poster.jpg", timeout=240)
     # the JPEG went through CUPS unchanged (sha256), with CUPS' print-quality normal
     assert job["client"] == "ipp:root" and job["preset"] == "default"
     assert job["copies"] == 2 and job["copies_done"] == 2
     assert_bit_exact(serve, job, jpeg, "plotter1")
-    job = wait_job(serve.client, "plan.tif", timeout=60)
+    job = wait_job(serve.client, "plan.tif", timeout=240)
     assert job["preset"] == "default"
     assert_bit_exact(serve, job, tif, "plotter1")
     if filters:
@@ -196,10 +196,10 @@ def test_with_wideprint_convs_tiff_and_pdf_pass_through_unchanged(cups, shop, tm
     pdf = _pdf(tmp_path / "flyer.pdf")
     lp(cups, "plotter2", tif, "-o", "print-quality=5")
     lp(cups, "plotter2", pdf)
-    job = wait_job(serve.client, "map.tif", timeout=60)
+    job = wait_job(serve.client, "map.tif", timeout=240)
     assert job["preset"] == "photo"                   # print-quality high
     assert_bit_exact(serve, job, tif, "plotter2")
-    job = wait_job(serve.client, "flyer.pdf", timeout=90)
+    job = wait_job(serve.client, "flyer.pdf", timeout=240)
     assert_bit_exact(serve, job, pdf, "plotter2")
 
 
@@ -215,9 +215,9 @@ def test_cups_install_passes_tiff_and_pdf_unchanged_with_or_without_cups_filters
     pdf = _pdf(tmp_path / f"{tag}-flyer.pdf")
     lp(cups, "plotter1", tif)
     lp(cups, "plotter1", pdf)
-    job = wait_job(serve.client, tif.name, timeout=90)
+    job = wait_job(serve.client, tif.name, timeout=240)
     assert_bit_exact(serve, job, tif, "plotter1")
-    job = wait_job(serve.client, pdf.name, timeout=90)
+    job = wait_job(serve.client, pdf.name, timeout=240)
     assert_bit_exact(serve, job, pdf, "plotter1")
 
 
