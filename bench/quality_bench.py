@@ -501,7 +501,8 @@ def print_targets(res: dict) -> None:
             rows.append((f"bluenoise / {ref}, {label}", ratio("bluenoise", ref, key)))
     rows.append(("vector / vced, mixed-tint grain", ratio("vector", "vced", "mix_grain")))
     for label, v in rows:
-        print(f"  {label:48s} {v:6.3f}")
+        if v == v:              # not NaN: both methods were scored (--methods, --only)
+            print(f"  {label:48s} {v:6.3f}")
 
     print()
     print("targets (issue 18)")
