@@ -233,15 +233,21 @@ def _is_cut_space(cs) -> bool:
     return bool(kind) and bool(real) and all(is_cut_name(n) for n in real)
 
 
-def _lookup_cs(resources, operand) -> bool:
-    """Is the colour space named by a cs/CS operand a cut colour?"""
+def _cut_names_of(resources) -> dict[str, bool]:
+    """Resource name of each colour space -> is it a cut colour (once per stream: a cs/CS
+    looked up each time cost two thirds of the edit)."""
     pikepdf = _pikepdf()
-    if isinstance(operand, pikepdf.Array):
-        return _is_cut_space(operand)
     d = resources.get("/ColorSpace") if isinstance(resources, pikepdf.Dictionary) else None
-    if not isinstance(d, pikepdf.Dictionary) or str(operand) not in d:
-        return False
-    return _is_cut_space(d[str(operand)])
+    if not isinstance(d, pikepdf.Dictionary):
+        return {}
+    return {str(k): _is_cut_space(v) for k, v in d.items()}
+
+
+def _lookup_cs(cut_cs: dict[str, bool], operand) -> bool:
+    """Is the colour space named by a cs/CS operand a cut colour?"""
+    if isinstance(operand, _pikepdf().Array):
+        return _is_cut_space(operand)
+    return cut_cs.get(str(operand), False)
 
 
 def _has_cut(resources) -> bool:
@@ -268,6 +274,7 @@ def _edit_stream(instructions, resources, stats: dict):
     fill_cut = stroke_cut = False
     tr = 0
     stack: list[tuple[bool, bool, int]] = []
+    cut_cs = _cut_names_of(resources)
     xobjects = resources.get("/XObject") if isinstance(resources, pikepdf.Dictionary) else None
     shadings = resources.get("/Shading") if isinstance(resources, pikepdf.Dictionary) else None
     for ins in instructions:
@@ -281,9 +288,9 @@ def _edit_stream(instructions, resources, stats: dict):
             if stack:
                 fill_cut, stroke_cut, tr = stack.pop()
         elif op == "cs":
-            fill_cut = _lookup_cs(resources, operands[0]) if operands else False
+            fill_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
         elif op == "CS":
-            stroke_cut = _lookup_cs(resources, operands[0]) if operands else False
+            stroke_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
         elif op in ("g", "rg", "k"):
             fill_cut = False
         elif op in ("G", "RG", "K"):
