@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -92,6 +93,11 @@ def installed_cups(request, tmp_path_factory, shop):
         pytest.fail("cups-filters is not installed: apt-get install cups-filters "
                     "(resources/debian-packages.txt; .ci/run installs it)")
     for cupsd in private_cupsd(tmp_path_factory, filters=filters):
+        # what this CUPS converts before the rules: cups-filters' PDF from a TIFF and a
+        # PDF, or nothing at all (a queue refuses both)
+        mime = [Path(cupsd.dir / "data" / "mime")] if not filters else [Path("/usr/share/cups/mime")]
+        for fmt in ("image/tiff", "application/pdf"):
+            assert bool(conversions_from(fmt, mime)) == filters, (fmt, conversions_from(fmt, mime))
         before = cupsd.mime_loads()
         r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "cups", "install",
                             "--server-root", str(cupsd.dir / "conf"),
