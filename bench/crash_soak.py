@@ -118,7 +118,7 @@ class Soak:
     def submit_jobs(self, index: int):
         from wideprint.app.server_cli import ApiError
         sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-        from conftest import random_planes, write_cmyk_tiff
+        from support.images import random_planes, write_cmyk_tiff
         rng = random.Random(self.seed * 1000 + index)
         folder = self.work / f"client-{index}"
         folder.mkdir()
@@ -184,7 +184,15 @@ class Soak:
         from wideprint.rip.planes import read_planes
         t0 = time.monotonic()
         self.start_server()
-        threads = [threading.Thread(target=self.submit_jobs, args=(i,)) for i in range(self.n_clients)]
+        crashed: list[str] = []          # a client that died submits nothing: never "ok"
+
+        def client(i: int) -> None:
+            try:
+                self.submit_jobs(i)
+            except BaseException as exc:  # noqa: BLE001 - reported as a problem
+                crashed.append(f"client {i} died: {type(exc).__name__}: {exc}")
+                raise
+        threads = [threading.Thread(target=client, args=(i,)) for i in range(self.n_clients)]
         threads.append(threading.Thread(target=self.operator, daemon=True))
         for t in threads:
             t.start()
@@ -227,6 +235,9 @@ class Soak:
             done_rows = sorted(r["copy"] for r in report if r["job_id"] == jid and r["outcome"] == "done")
             if done_rows != list(range(1, sub["copies"] + 1)):
                 problems.append(f"job {jid}: done rows for copies {done_rows}, {sub['copies']} copies")
+        problems.extend(crashed)
+        if not by_id:
+            problems.append("no job was submitted")
         outcomes: dict[str, int] = {}
         for r in report:
             outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
