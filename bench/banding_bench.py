@@ -1,8 +1,12 @@
 """Banding, graininess and mottle of the banding chart on the emulated machines, per pass
 mask and pass count (issue 36; docs/quality.md; results in bench/results/banding*.json).
 
-    python -m wideprint.bench.banding_bench [--machines typical,tired] [--passes 1,2,4]
+    .venv/bin/python bench/banding_bench.py [--machines typical,tired] [--passes 1,2,4]
         [--masks checker,feather] [--out bench/results/banding.json] [--seeds 1,2]
+
+A machine is a named one (perfect, typical, tired: docs/physical.md "The machine") or
+kinds of error by themselves joined by '+' (`feed-noise=8um`).  One pass has no mask
+to choose: it runs the checkerboard only.
 
 Each run prints `wideprint test-print banding-scan` (300 dpi, 100 x 64 mm: ten flat tints
 along the feed) on the in-process emulator with `--inject machine=NAME --inject seed=S`,
@@ -26,19 +30,23 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..app.cli import main as wideprint
-from ..app.quality import measure_scan
-from ..rip.settings import PASS_MASKS
+from wideprint.app.cli import main as wideprint
+from wideprint.app.quality import measure_scan
+from wideprint.rip.settings import PASS_MASKS
 
 SCAN_DPI = 600
 DPI = 300
+WIDTH_MM = 100
 
 
 def run(machine: str, passes: int, mask: str, seed: int, workdir: str, bidir: bool = False) -> dict:
     scan = os.path.join(workdir, f"{machine}-{passes}-{mask}-{seed}.tif")
     argv = ["test-print", "banding-scan", "--dpi", str(DPI), "--passes", str(passes),
             "--pass-mask", mask, "--scan-out", scan, "--scan-dpi", str(SCAN_DPI),
-            "--inject", f"machine={machine}", "--inject", f"seed={seed}"] + (["--bidir"] if bidir else [])
+            "--width-mm", str(WIDTH_MM), "--inject", f"seed={seed}"] + (["--bidir"] if bidir else [])
+    # a named machine, or kinds of error by themselves: feed-noise=8um+volume-spread=3%
+    for item in (machine.split("+") if "=" in machine else [f"machine={machine}"]):
+        argv += ["--inject", item]
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):
         rc = wideprint(argv)
@@ -60,19 +68,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="1,2")
     ap.add_argument("--bidir", action="store_true")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--merge", nargs="+", metavar="JSON",
+                    help="no runs: the runs of these result files, tabled together into --out")
     args = ap.parse_args(argv)
-    runs = []
+    runs: list[dict] = []
+    if args.merge:
+        for path in args.merge:
+            runs += json.loads(Path(path).read_text())["runs"]
+        return summarise(runs, args.out)
     with tempfile.TemporaryDirectory(prefix="wideprint-banding-") as d:
         for machine in args.machines.split(","):
             for passes in (int(p) for p in args.passes.split(",")):
                 for seed in (int(s) for s in args.seeds.split(",")):
-                    for mask in args.masks.split(","):
+                    for mask in (args.masks.split(",") if passes > 1 else ["checker"]):
                         r = run(machine, passes, mask, seed, d, args.bidir)
                         runs.append(r)
+                        if args.out:            # as it goes: a long bench keeps what it ran
+                            Path(args.out).write_text(json.dumps(dict(runs=runs), indent=1) + "\n")
                         print(f"{machine:8} {passes} pass {mask:9} seed {seed}: banding "
                               f"{r['banding']:.3f} (worst {r['banding_max']:.3f}) grain "
                               f"{r['graininess']:.3f} mottle {r['mottle']:.3f}  {r['seconds']:.1f} s",
                               flush=True)
+    return summarise(runs, args.out)
+
+
+def summarise(runs: list[dict], out: str | None) -> int:
+    """Per mode (machine, passes, direction) and mask: the mean of the runs' figures."""
     modes: dict[str, dict] = {}
     for r in runs:
         m = modes.setdefault(f"{r['machine']} {r['passes']} pass{' bidir' if r['bidir'] else ''}", {})
@@ -80,10 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     table = {mode: {mask: {k: round(sum(r[k] for r in rs) / len(rs), 4)
                            for k in ("banding", "banding_max", "graininess", "mottle")}
                     for mask, rs in masks.items()} for mode, masks in modes.items()}
+    for masks in table.values():           # against today's default mask in the same mode
+        if "checker" in masks and masks["checker"]["banding"] > 0:
+            for v in masks.values():
+                v["banding_vs_checker"] = round(v["banding"] / masks["checker"]["banding"], 3)
     for mode, masks in table.items():
         print(mode + ": " + ", ".join(f"{mask} {v['banding']:.3f}" for mask, v in masks.items()))
-    if args.out:
-        Path(args.out).write_text(json.dumps(dict(
+    if out:
+        Path(out).write_text(json.dumps(dict(
             what="banding chart, 300 dpi, 600 dpi scan, eye at 500 mm (docs/quality.md)",
             machine=platform.machine(), python=sys.version.split()[0], modes=table, runs=runs),
             indent=1) + "\n")

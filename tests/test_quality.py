@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from test_swath import replay
+from support.printing import replay
 from wideprint.app import api, quality as Q
 from wideprint.app.cli import main as wideprint
 from wideprint.device_sim.faults import MACHINES, Faults
@@ -174,10 +174,10 @@ def test_masks_print_bit_exact_on_the_perfect_printer(tmp_path, mask):
 
 
 # -- the chart and the report on the emulator's scans ----------------------------------------
-def chart(tmp_path, name, *inject, passes=1, mask=None, width_mm=100):
+def chart(tmp_path, name, *inject, passes=1, mask=None, width_mm=100, scan_dpi=600):
     scan = tmp_path / f"{name}.tif"
     argv = ["test-print", "banding-scan", "--dpi", "300", "--passes", str(passes),
-            "--width-mm", str(width_mm), "--scan-out", str(scan), "--scan-dpi", "600"]
+            "--width-mm", str(width_mm), "--scan-out", str(scan), "--scan-dpi", str(scan_dpi)]
     argv += ["--pass-mask", mask] if mask else []
     for i in inject:
         argv += ["--inject", i]
@@ -211,7 +211,7 @@ def test_a_known_feed_error_is_banding_of_its_period_and_amplitude(tmp_path, cap
 def test_the_report_runs_on_the_typical_and_tired_machines_scans(tmp_path, capsys):
     figures = {}
     for machine in ("typical", "tired"):
-        scan = chart(tmp_path, machine, f"machine={machine}", passes=4)
+        scan = chart(tmp_path, machine, f"machine={machine}", passes=4, width_mm=80, scan_dpi=400)
         capsys.readouterr()
         assert wideprint(["quality", str(scan), "--passes", "4", "--json"]) == 0
         rep = json.loads(capsys.readouterr().out)

@@ -39,6 +39,7 @@ PATTERN_NAMES = {
     "heads-scan": "Head positions, for a scan",
     "feed-scan": "Paper feed, for a scan",
     "wedge-scan": "Step wedge (ink curves), for a scan",
+    "banding-scan": "Banding and grain chart, for a scan",
 }
 # the scan patterns -> the `wideprint calibrate` measurement that reads them (app/calibrate.py;
 # the registry: rip/testpatterns.py)
