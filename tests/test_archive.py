@@ -7,6 +7,7 @@ and the API."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import time
 from pathlib import Path
@@ -27,8 +28,8 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "server.md"
 def test_the_archive_options_are_declared_once_and_documented():
     text = DOCS.read_text()
     section = text.split("## Archive and reprint", 1)[1].split("\n## ", 1)[0]
-    rows = re.findall(r"^\| `(--[a-z-]+) [A-Z]+` \| ([0-9.]+) \| (.+) \|$", section, re.M)
-    assert [(f, float(d), doc) for f, d, doc in rows] == \
+    rows = re.findall(r"^\| `(--[a-z-]+)(?: [A-Z]+)?` \| ([0-9.]+|off) \| (.+) \|$", section, re.M)
+    assert [(f, False if d == "off" else float(d), doc) for f, d, doc in rows] == \
         [(o.flag, o.default, o.doc) for o in archive.OPTIONS]
     from wideprint.app.cli import build_parser
     serve = build_parser()._subparsers._group_actions[0].choices["serve"]
@@ -171,3 +172,38 @@ def test_rip_and_hold_prints_the_kept_planes_bit_exact(shop, tmp_path, caplog):
     with pytest.raises(ApiError) as e:
         c.request("POST", f"/v1/jobs/{ahead['id']}/rip-hold")
     assert e.value.status == 409 and "only a job not yet started" in str(e.value)
+
+
+def test_archived_planes_are_reprinted_without_ripping_again(print_server, tmp_path, caplog):
+    """--archive-planes: a done job ripped ahead keeps its planes with its file; its reprint
+    with the same settings prints them (a hard link), bit-exact; with other settings it
+    rips."""
+    import logging
+    caplog.set_level(logging.INFO, logger="wideprint.server")
+    s = print_server(archive_planes=True)
+    c = Client(s.state_dir)
+    try:
+        planes = random_planes(200, 240, seed=31)
+        src = write_cmyk_tiff(tmp_path / "repeat.tif", planes)
+        first = c.submit(src, rip_hold=True)["job"]
+        wait_for(lambda: (c.job(first["id"]).get("ripped") or {}).get("ready"), 60, what="ripped")
+        c.action(first["id"], "release")
+        assert c.wait(first["id"], 60)["state"] == "done"
+        s.expire_spool()                               # the archive keeps its planes
+        kept = list((s.state_dir / "ripped").iterdir())
+        assert len(kept) == 1
+        same = c.reprint(first["id"])
+        other = c.reprint(first["id"], settings={"passes": 2})
+        assert same["ripped"]["ready"] and not other.get("ripped")
+        for j in (same, other):
+            assert c.wait(j["id"], 60)["state"] == "done"
+            assert np.array_equal(read_planes(s.root / "media" / f"job-{j['id']}.tif"), planes)
+        used = [r.getMessage() for r in caplog.records if "printing its planes" in r.getMessage()]
+        assert used == [f"job {first['id']}: printing its planes, ripped ahead",
+                        f"job {same['id']}: printing its planes, ripped ahead"], used
+        # the reprint is archived with its planes too: a second name, not a second copy
+        s.expire_spool()
+        assert len(list((s.state_dir / "ripped").iterdir())) == 2
+        assert kept[0].exists() and os.stat(kept[0]).st_nlink == 2
+    finally:
+        c.close()

@@ -21,7 +21,7 @@ from .config import _fsync_dir
 @dataclass(frozen=True)
 class Option:
     name: str              # ServerConfig field; the `serve` option is --name-with-dashes
-    kind: type
+    kind: type             # float, or bool: a flag (on when given)
     default: float
     metavar: str
     doc: str
@@ -39,6 +39,9 @@ OPTIONS: tuple[Option, ...] = (
     Option("archive_max_gb", float, 20.0, "GB",
            "the archive's total size at most: the oldest done jobs' files go first (0: no "
            "limit but the days)"),
+    Option("archive_planes", bool, False, "",
+           "keep a done job's ripped planes (RIP and hold) with its file: a reprint with the "
+           "same settings prints them without ripping again"),
 )
 DEFAULTS = {o.name: o.default for o in OPTIONS}
 
@@ -46,8 +49,11 @@ DEFAULTS = {o.name: o.default for o in OPTIONS}
 def add_arguments(parser) -> None:
     """The archive's `serve` options, from OPTIONS."""
     for o in OPTIONS:
-        parser.add_argument(o.flag, type=o.kind, metavar=o.metavar, default=None,
-                            help=f"{o.doc} (default {o.default:g})")
+        if o.kind is bool:
+            parser.add_argument(o.flag, action="store_true", default=None, help=o.doc)
+        else:
+            parser.add_argument(o.flag, type=o.kind, metavar=o.metavar, default=None,
+                                help=f"{o.doc} (default {o.default:g})")
 
 
 def from_args(args) -> dict:
@@ -56,6 +62,9 @@ def from_args(args) -> dict:
     for o in OPTIONS:
         v = getattr(args, o.name, None)
         if v is None:
+            continue
+        if o.kind is bool:
+            out[o.name] = bool(v)
             continue
         if not v >= 0:                                  # negative or NaN
             raise ValueError(f"{o.flag} must be 0 or more")
@@ -70,6 +79,10 @@ def max_bytes(config) -> int | None:
 
 def keeps_done(config) -> bool:
     return float(getattr(config, "archive_days", DEFAULTS["archive_days"])) > 0
+
+
+def keeps_planes(config) -> bool:
+    return keeps_done(config) and bool(getattr(config, "archive_planes", False))
 
 
 def link_copy(spool_dir: Path, src: str) -> str:

@@ -219,6 +219,7 @@ class ServerConfig:
     keep_failed_s: float = 7 * 86400       # spool copies of failed/cancelled jobs (requeue)
     archive_days: float = 30.0             # done jobs' files, for reprints (archive.OPTIONS)
     archive_max_gb: float = 20.0           # the archive's total size (archive.OPTIONS)
+    archive_planes: bool = False           # done jobs keep their ripped planes (archive.OPTIONS)
     settle_s: float = DEFAULT_SETTLE_S     # hot folders: unchanged this long (and no writer)
     api_timeout_s: float = DEFAULT_API_TIMEOUT_S      # idle API connections are closed
     api_max_connections: int = DEFAULT_API_CONNECTIONS  # served at once; more: 503

@@ -170,7 +170,7 @@ class PrintServer:
                 fsck.remove_copy(path)
             except OSError:
                 pass
-        clean_planes(self.state_dir, self.spool.planes_in_use())
+        clean_planes(self.state_dir, self.spool.planes_in_use(archive.keeps_planes(self.config)))
 
     def request_stop(self) -> None:
         """An authorised client asked the server to stop (the GUI that started it, when it
@@ -475,9 +475,29 @@ class PrintServer:
         except BaseException:
             fsck.remove_copy(path)
             raise
+        self._reuse_planes(job, new)
         log.info("job %s reprints job %s (%s)", new["id"], job_id, job["name"])
         self.notify()
         return new
+
+    def _reuse_planes(self, old: dict, new: dict) -> None:
+        """A reprint of a job whose ripped planes the archive kept (--archive-planes) gets
+        them (a hard link) when they are still its halftone: same file, settings, profile."""
+        from .ripped import RIPPED_DIR, planes_key
+        info = old.get("ripped") or {}
+        path = info.get("path")
+        profile = self.profiles.get(new.get("printer") or "") or self.profile
+        if not path or not os.path.exists(path) or info.get("key") != planes_key(new, profile):
+            return
+        link = self.state_dir / RIPPED_DIR / f"{new['id']}-{info['key']}.tif"
+        try:
+            os.link(path, link)
+        except OSError as exc:
+            log.warning("job %s: the archived planes of job %s not reused: %s", new["id"],
+                        old["id"], exc)
+            return
+        self.spool.set_ripped(new["id"], dict(info, path=str(link)))
+        new["ripped"] = dict(info, path=str(link))
 
     def _merged_settings(self, old: dict, raw, profile) -> dict:
         """A partial settings mapping checked by the one schema and laid over `old`

@@ -696,11 +696,14 @@ class Spool:
             "SELECT hot_path FROM jobs WHERE hot_path IS NOT NULL AND state IN "
             "('queued','held','printing')")}
 
-    def planes_in_use(self) -> set[str]:
-        """The kept planes of the jobs still waiting or printing (RIP and hold)."""
+    def planes_in_use(self, archived: bool = False) -> set[str]:
+        """The kept planes of the jobs still waiting or printing (RIP and hold); archived:
+        and of the done jobs whose file the archive keeps."""
         out = set()
         for (info,) in self.db.execute("SELECT ripped FROM jobs WHERE ripped IS NOT NULL AND "
-                                       "state IN ('queued','held','printing')"):
+                                       "(state IN ('queued','held','printing') OR (? AND "
+                                       "state='done' AND spool_path IS NOT NULL))",
+                                       (int(archived),)):
             path = json.loads(info).get("path")
             if path:
                 out.add(path)

@@ -13,7 +13,7 @@ import threading
 import time
 from typing import Any
 
-from . import crashpoints, fsck
+from . import archive, crashpoints, fsck
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .ripped import planes_job
 from .spool import COLORS, disk_full
@@ -766,7 +766,8 @@ class Worker(threading.Thread):
         crashpoints.reached("finish")
         self._cancel.discard(job["id"])
         planes = (job.get("ripped") or {}).get("path")
-        if planes:                                 # RIP and hold: the kept planes go with it
+        if planes and not (state == "done" and keep and archive.keeps_planes(self.srv.config)):
+            # RIP and hold: the kept planes go with it, unless the archive keeps them
             try:
                 os.unlink(planes)
             except OSError:

@@ -253,6 +253,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_hold_by_preset_then_release_with_estimate_and_quote",  # 6.9
         "test_a_done_job_is_reprinted_bit_exact_and_with_changed_settings",  # 4.8
         "test_rip_and_hold_prints_the_kept_planes_bit_exact",  # 7.7
+        "test_archived_planes_are_reprinted_without_ripping_again",  # 5
     },
     "test_costs.py": {
         "test_report_costs_from_a_stated_price_list",  # 5.5
