@@ -461,7 +461,11 @@ def test_the_roll_on_the_card_and_a_job_it_cannot_hold_is_held(qtbot, shop_win, 
     shown = " ".join(str(t) for t in tip if t) + " ".join(
         str(shop_win.queue_model.data(shop_win.queue_model.index(row, c)))
         for c in range(shop_win.queue_model.columnCount()))
-    assert "needs" in shown, shown
+    assert "needs" in shown and "held: roll too short" in shown, shown
+    # the warning is in the GUI's log and status bar (once)
+    qtbot.waitUntil(lambda: "needs" in shop_win.statusBar().currentMessage(), timeout=10_000)
+    qtbot.waitUntil(lambda: "long-banner.tif: needs" in shop_win.logview.toPlainText(),
+                    timeout=10_000)
 
 
 def test_rip_and_hold_from_the_gui(qtbot, shop_win, shop, tmp_path):

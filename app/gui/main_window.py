@@ -232,6 +232,7 @@ class MainWindow(QMainWindow):
         self._media_pending: set[str] = set()
         self._shown_key = None
         self._ended_logged: set[int] = set()
+        self._roll_warned: set[int] = set()      # jobs held for a short roll, logged once
         self.calibration = None
 
         self._faults: dict[str, str] = {}          # printer -> its fault, as logged
@@ -572,6 +573,12 @@ class MainWindow(QMainWindow):
             self.queue_view.select_ids(keep)
         self._want_thumbs(jobs)
         self._select_added()
+        for j in jobs:           # the server held a job the roll cannot hold: say so, once
+            if j["state"] == "held" and "held before printing" in (j.get("message") or "") \
+                    and j["id"] not in self._roll_warned:
+                self._roll_warned.add(j["id"])
+                log.warning("job %s: %s", j["id"], safe(short_paths(j["message"])))
+                self.statusBar().showMessage(f"job {j['id']}: {short_paths(j['message'])}", 30000)
         gone = before - {j["id"] for j in jobs}
         if gone:
             self.refresh_history(log_ended=gone)
@@ -609,6 +616,7 @@ class MainWindow(QMainWindow):
                 del m.thumbs[job_id]
         self._thumbs_asked = {k for k in self._thumbs_asked if k[0] in keep}
         self._ended_logged &= keep
+        self._roll_warned &= keep
 
     def _want_thumbs(self, jobs: list) -> None:
         for j in jobs:
