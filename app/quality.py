@@ -70,15 +70,23 @@ _VTF_PEAK = _vtf_peak()
 
 # -- the scan -----------------------------------------------------------------------------
 def read_lightness(path: str, scan_dpi: float | None = None) -> tuple[np.ndarray, float]:
-    """(L* relative to the scan's paper white (H, W) float32, scan dpi); the file read as
-    the calibration reads it (app/calibrate.read_scan_white: 8 or 16 bits, RGB or grey,
-    the resolution tags)."""
-    from .calibrate import CalibrationError, read_scan_white
-    try:
-        dark, white, dpi = read_scan_white(path, scan_dpi)
-    except CalibrationError as exc:
-        raise QualityError(str(exc)) from None
-    return lightness_from_levels(white[None, None, :] - dark, white).astype(np.float32), dpi
+    """(L* relative to the scan's paper white (H, W) float32, scan dpi): 8 or 16 bits, RGB
+    or grey, the paper each band's 90th percentile as `calibrate` takes it."""
+    import tifffile
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages.first
+        img = page.asarray()
+        if scan_dpi is None:
+            res, unit = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
+            if res is None:
+                raise QualityError(f"{path}: no resolution tags; give --scan-dpi")
+            scan_dpi = res.value[0] / res.value[1] * (2.54 if unit is not None and int(unit.value) == 3 else 1.0)
+    if img.dtype.kind not in "uf":
+        raise QualityError(f"{path}: {img.dtype} samples: not a scan")
+    levels = img.astype(np.float32) * np.float32(255.0 / (np.iinfo(img.dtype).max if img.dtype.kind == "u" else 1.0))
+    levels = levels[:, :, :3] if levels.ndim == 3 else levels[:, :, None]
+    white = np.percentile(levels[::4, ::4].reshape(-1, levels.shape[2]), 90, axis=0)
+    return lightness_from_levels(np.minimum(levels, white), white).astype(np.float32), float(scan_dpi)
 
 
 def _luminance(lstar: np.ndarray) -> np.ndarray:
