@@ -10,7 +10,7 @@ painting it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator
 
 from .cutnames import is_cut_name
@@ -262,18 +262,52 @@ _PAINT = {"S": (False, True), "s": (False, True), "f": (True, False), "F": (True
 _FILL_ONLY = {"B": "f", "B*": "f*", "b": "f", "b*": "f*"}
 _STROKE_ONLY = {"B": "S", "B*": "S", "b": "s", "b*": "s"}
 _TEXT_SHOW = ("Tj", "TJ", "'", '"')
-# text render mode -> (fills, strokes, the mode without fill, the mode without stroke)
-_TR = {0: (True, False, 3, 0), 1: (False, True, 1, 3), 2: (True, True, 1, 0),
-       4: (True, False, 7, 4), 5: (False, True, 5, 7), 6: (True, True, 5, 4)}
+# text render mode -> (fills, strokes)
+_TR_PAINTS = {0: (True, False), 1: (False, True), 2: (True, True), 4: (True, False),
+              5: (False, True), 6: (True, True)}
+
+
+@dataclass
+class _Gstate:
+    """What the edit follows of the graphics state (pushed by q, popped by Q)."""
+    fill_cut: bool = False
+    stroke_cut: bool = False
+    tr: int = 0
+    alpha: tuple = (1.0, 1.0)       # ExtGState ca, CA
+
+
+def _ins(operands, op: str):
+    pikepdf = _pikepdf()
+    return pikepdf.ContentStreamInstruction(list(operands), pikepdf.Operator(op))
+
+
+def _alpha_state(resources, name, alpha: tuple) -> tuple:
+    pikepdf = _pikepdf()
+    d = resources.get("/ExtGState") if isinstance(resources, pikepdf.Dictionary) else None
+    g = d.get(str(name)) if isinstance(d, pikepdf.Dictionary) else None
+    if not isinstance(g, pikepdf.Dictionary):
+        return alpha
+    return (float(g.get("/ca", alpha[0])), float(g.get("/CA", alpha[1])))
+
+
+def _alpha_gs(resources, alpha: tuple):
+    """A `gs` instruction setting the fill and stroke alpha (ca, CA) (an ExtGState added to
+    the resources)."""
+    pikepdf = _pikepdf()
+    if "/ExtGState" not in resources:
+        resources.ExtGState = pikepdf.Dictionary()
+    name = f"/WPspotA{alpha[0]:g}_{alpha[1]:g}".replace(".", "p")
+    if name not in resources.ExtGState:
+        resources.ExtGState[name] = pikepdf.Dictionary(Type=pikepdf.Name.ExtGState, ca=alpha[0], CA=alpha[1])
+    return _ins([pikepdf.Name(name)], "gs")
 
 
 def _edit_stream(instructions, resources, stats: dict):
     """The instructions with every painting in a cut colour removed."""
     pikepdf = _pikepdf()
     out = []
-    fill_cut = stroke_cut = False
-    tr = 0
-    stack: list[tuple[bool, bool, int]] = []
+    st = _Gstate()
+    stack: list[_Gstate] = []
     cut_cs = _cut_names_of(resources)
     xobjects = resources.get("/XObject") if isinstance(resources, pikepdf.Dictionary) else None
     shadings = resources.get("/Shading") if isinstance(resources, pikepdf.Dictionary) else None
@@ -283,50 +317,52 @@ def _edit_stream(instructions, resources, stats: dict):
             continue
         operands, op = ins.operands, str(ins.operator)
         if op == "q":
-            stack.append((fill_cut, stroke_cut, tr))
+            stack.append(replace(st))
         elif op == "Q":
             if stack:
-                fill_cut, stroke_cut, tr = stack.pop()
+                st = stack.pop()
         elif op == "cs":
-            fill_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
+            st.fill_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
         elif op == "CS":
-            stroke_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
+            st.stroke_cut = _lookup_cs(cut_cs, operands[0]) if operands else False
         elif op in ("g", "rg", "k"):
-            fill_cut = False
+            st.fill_cut = False
         elif op in ("G", "RG", "K"):
-            stroke_cut = False
+            st.stroke_cut = False
         elif op == "Tr" and operands:
-            tr = int(operands[0])
-        elif op in _PAINT and (fill_cut or stroke_cut):
+            st.tr = int(operands[0])
+        elif op == "gs" and operands:
+            st.alpha = _alpha_state(resources, operands[0], st.alpha)
+        elif op in _PAINT and (st.fill_cut or st.stroke_cut):
             fills, strokes = _PAINT[op]
-            if (not fills or fill_cut) and (not strokes or stroke_cut):
-                out.append(pikepdf.ContentStreamInstruction([], pikepdf.Operator("n")))
+            if (not fills or st.fill_cut) and (not strokes or st.stroke_cut):
+                out.append(_ins([], "n"))
                 stats["cut_ops"] += 1
                 continue
             if fills and strokes:
-                op = _FILL_ONLY[op] if stroke_cut else _STROKE_ONLY[op]
-                out.append(pikepdf.ContentStreamInstruction([], pikepdf.Operator(op)))
+                out.append(_ins([], _FILL_ONLY[op] if st.stroke_cut else _STROKE_ONLY[op]))
                 stats["cut_ops"] += 1
                 continue
-        elif op in _TEXT_SHOW and (fill_cut or stroke_cut) and tr in _TR:
-            fills, strokes, no_fill, no_stroke = _TR[tr]
-            mode = tr
-            if fills and fill_cut:
-                mode = no_fill
-            if strokes and stroke_cut:
-                mode = _TR[mode][3] if mode in _TR else mode
-            if mode != tr:
-                stats["cut_ops"] += 1
-                out.append(pikepdf.ContentStreamInstruction([mode], pikepdf.Operator("Tr")))
+        elif op in _TEXT_SHOW and (st.fill_cut or st.stroke_cut):
+            fills, strokes = _TR_PAINTS.get(st.tr, (False, False))
+            no_fill, no_stroke = fills and st.fill_cut, strokes and st.stroke_cut
+            if no_fill or no_stroke:
+                # the glyphs painted fully transparent (alpha 0): nothing printed, nothing
+                # knocked out, the text advances.  Not render mode 3, whose text
+                # Ghostscript 10.00 draws without advancing (what follows moved back);
+                # not overprint, which a colour converted to the output profile ignores
+                out.append(_alpha_gs(resources, (0.0 if no_fill else st.alpha[0],
+                                                 0.0 if no_stroke else st.alpha[1])))
                 out.append(ins)
-                out.append(pikepdf.ContentStreamInstruction([tr], pikepdf.Operator("Tr")))
+                out.append(_alpha_gs(resources, st.alpha))
+                stats["cut_ops"] += 1
                 continue
         elif op == "Do" and operands and isinstance(xobjects, pikepdf.Dictionary) \
                 and str(operands[0]) in xobjects:
             xo = xobjects[str(operands[0])]
             if _name(xo.get("/Subtype", "")) == "Image":
                 mask = bool(xo.get("/ImageMask", False))
-                if (mask and fill_cut) or ("/ColorSpace" in xo and _is_cut_space(xo.ColorSpace)):
+                if (mask and st.fill_cut) or ("/ColorSpace" in xo and _is_cut_space(xo.ColorSpace)):
                     stats["cut_ops"] += 1
                     continue
         elif op == "sh" and operands and isinstance(shadings, pikepdf.Dictionary) \

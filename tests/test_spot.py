@@ -365,3 +365,35 @@ def test_postscript_spots_go_the_same_way(spots_dir, tmp_path):
     want = np.round(np.array(book.resolve("Brand Red", "vinyl-300", DEFAULT_OUTPUT_ICC).cmyk) * 255)
     assert np.abs(img[h // 2, int(40 / 216 * w)].astype(int) - want).max() <= 1
     assert (img[h // 2 - 10: h // 2 + 10, int(100 / 216 * w):int(180 / 216 * w)] == 51).all()
+
+
+def test_cut_colour_in_forms_text_and_fill_and_stroke(spots_dir, tmp_path):
+    """A form's cut stroke and fill, text shown in a cut colour (its advance kept) and the
+    stroke half of a fill-and-stroke (`B`) print nothing; what else they hold prints."""
+    pdf = pikepdf.new()
+    page = pdf.add_blank_page(page_size=(216, 144))
+    fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0], C1=[0, 1, 0, 0], N=1)
+    cut = pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/Thru-cut"), pikepdf.Name.DeviceCMYK, fn])
+    form = pikepdf.Stream(pdf, b"/C CS 1 SCN 6 w 10 10 m 100 10 l S /C cs 1 scn 10 30 50 20 re f "
+                               b"0 0 1 0 k 10 60 20 20 re B")
+    form.Type, form.Subtype, form.BBox = pikepdf.Name.XObject, pikepdf.Name.Form, [0, 0, 216, 144]
+    form.Resources = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(C=cut))
+    font = pikepdf.Dictionary(Type=pikepdf.Name.Font, Subtype=pikepdf.Name.Type1, BaseFont=pikepdf.Name.Helvetica)
+    page.Resources = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(C=cut), Font=pikepdf.Dictionary(F1=font),
+                                        XObject=pikepdf.Dictionary(F0=pdf.make_indirect(form)))
+    page.Contents = pdf.make_stream(b"0.5 0 0 0 k 100 70 116 50 re f q /F0 Do Q "
+                                    b"BT /F1 40 Tf /C cs 1 scn 110 80 Td (CUT) Tj 0 0 0 1 k (K) Tj ET")
+    path = tmp_path / "cut.pdf"
+    pdf.save(path)
+    img, spots = _raster(path)
+    assert [(s["name"], s["resolved"]) for s in spots] == [("Thru-cut", "cut")]
+    assert (img[..., 1] == 0).all()                       # the cut colour's magenta nowhere
+    h, w = img.shape[:2]
+    y_rows = np.nonzero(img[..., 2].any(axis=1))[0]        # B's fill kept, its cut stroke not
+    assert len(y_rows) == pytest.approx(20 / 144 * h, abs=2)
+    # the cut text leaves the cyan under it as it is, and "K" prints after its advance
+    # (Helvetica C, U, T at 40 pt: 82.2 pt; K starts 3 pt in), also through the media's profile
+    for im in (img, _raster(path, RipSettings(output_icc=DEFAULT_OUTPUT_ICC))[0]):
+        under = im[int((144 - 118) / 144 * h):int((144 - 72) / 144 * h), int(112 / 216 * w):int(190 / 216 * w)]
+        assert (under == under[0, 0]).all() and under[0, 0, 0] > 100
+        assert np.nonzero(im[..., 3].any(axis=0))[0].min() == pytest.approx((110 + 82.2 + 3) / 216 * w, abs=3)

@@ -294,6 +294,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_pdf_spots_print_their_recipes_and_others_their_alternate",  # 2.7
         "test_postscript_spots_go_the_same_way",  # 1.9
         "test_devicen_mixes_library_recipes_and_process_inks",  # 0.9
+        "test_cut_colour_in_forms_text_and_fill_and_stroke",  # 0.9
         "test_a_cut_line_neither_prints_nor_knocks_out",  # 1.1
         "test_a_document_without_library_or_cut_colours_is_not_rewritten",  # 0.9
         "test_swatch_book_round_trip",  # 0.8
