@@ -18,6 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 # the shared helpers live in tests/support, and test files import them from there
 # (tests/test_support.py); this file turns them into fixtures
+from support.background import Background, start_declared  # noqa: E402
 from support.server import ServerProcess, inprocess_server  # noqa: E402
 
 
@@ -52,6 +53,29 @@ def pytest_collection_modifyitems(config, items):
         function = getattr(item, "originalname", None) or item.name.split("[")[0]
         for name in markers_for(item.path.name, function, getattr(item, "fixturenames", ())):
             item.add_marker(getattr(pytest.mark, name))
+
+
+def pytest_collection_finish(session):
+    """The long single-threaded computations that the run's tests declare (BACKGROUND in
+    their module, tests/support/background.py) start now, at the lowest priority."""
+    if session.config.option.collectonly or not session.items:
+        return
+    session.config._wideprint_background = Background()
+    start_declared(session.items, session.config._wideprint_background)
+
+
+def pytest_sessionfinish(session):
+    bg = getattr(session.config, "_wideprint_background", None)
+    if bg is not None:
+        bg.close()
+
+
+@pytest.fixture(scope="session")
+def background(pytestconfig):
+    """The run's background computations (support.background.Background)."""
+    bg = getattr(pytestconfig, "_wideprint_background", None)
+    assert bg is not None, "no background computations were started"
+    return bg
 
 
 @pytest.fixture(scope="session")

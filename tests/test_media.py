@@ -2,10 +2,8 @@
 issue 33): create, verify, drift, recalibrate with the figures."""
 
 import json
-import os
 import re
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -189,48 +187,26 @@ def test_ti3_round_trip(tmp_path):
 
 
 # -- the loop on the emulator (slow: tests/support/marks.py) ---------------------------------
-#: the whole `media create` loops of the tests below, by test: (entry name, options)
-LOOPS = {
-    "test_media_create_runs_the_loop_in_minutes": ("loop", ["--patches", "1000"]),
+#: `media create` loops with no figure of their own time to check, by test: they start with
+#: the session at the lowest priority (tests/support/background.py) and take the core the
+#: rest of the suite leaves idle; ArgyllCMS's colprof is minutes of one core for these two
+CREATE = [sys.executable, "-m", "wideprint.app.cli", "media", "create"]
+LIBRARY = {"WIDEPRINT_MEDIA_DIR": "{dir}"}
+BACKGROUND = {
     "test_every_dpi_mode_prints_the_same_colour": (
-        "modes", ["--patches", "600", "--drop-budget", "0.5", "--modes", "150,600"]),
-    "test_a_media_made_from_scans_is_within_2_5": ("scanned", ["--scan"]),
+        "media-modes", CREATE + ["modes", "--patches", "600", "--drop-budget", "0.5",
+                                 "--modes", "150,600", "--json"], LIBRARY),
+    "test_a_media_made_from_scans_is_within_2_5": (
+        "media-scanned", CREATE + ["scanned", "--scan", "--json"], LIBRARY),
 }
 
 
-@pytest.fixture(scope="module")
-def loops(request, tmp_path_factory):
-    """`wideprint media create` of every loop in LOOPS whose test is in this run, started
-    together, each as its own process, when the first of those tests needs it.  A loop is
-    mostly ArgyllCMS's targen and colprof, single-threaded programs: run one after another the
-    machine's second core idled for minutes; side by side they take about half the time.  Each test then
-    waits for its own loop and checks it as it did when it ran the command itself.  Yields
-    the library folder and {entry name: process}; the output is in LIB/NAME.out, .err."""
-    wanted = {item.originalname or item.name for item in request.session.items
-              if item.module is request.module}
-    lib = tmp_path_factory.mktemp("media-loops")
-    env = {**os.environ, "WIDEPRINT_MEDIA_DIR": str(lib)}
-    procs = {}
-    for test, (name, options) in LOOPS.items():
-        if test in wanted:
-            with open(lib / f"{name}.out", "wb") as out, open(lib / f"{name}.err", "wb") as err:
-                procs[name] = subprocess.Popen(
-                    [sys.executable, "-m", "wideprint.app.cli", "media", "create", name,
-                     *options, "--json"], env=env, stdout=out, stderr=err)
-    yield lib, procs
-    for p in procs.values():
-        if p.poll() is None:
-            p.kill()
-            p.wait()
-
-
-def loop_output(loops, name: str, monkeypatch) -> dict:
-    """The JSON of the loop `name` once its process ended (it must succeed); the library is
+def background_loop(background, key: str, monkeypatch) -> dict:
+    """The JSON of the background loop `key` once it ended (it must succeed); its library is
     then this test's (WIDEPRINT_MEDIA_DIR)."""
-    lib, procs = loops
-    assert procs[name].wait(timeout=1800) == 0, (lib / f"{name}.err").read_text()
-    monkeypatch.setenv("WIDEPRINT_MEDIA_DIR", str(lib))
-    return json.loads((lib / f"{name}.out").read_text())
+    out = json.loads(background.output(key))
+    monkeypatch.setenv("WIDEPRINT_MEDIA_DIR", str(background.folder(key)))
+    return out
 
 
 @needs_argyll
@@ -255,8 +231,9 @@ def test_default_media_verifies_drift_fails_and_recalibrate_restores(profile, tm
 
 
 @needs_argyll
-def test_media_create_runs_the_loop_in_minutes(loops, monkeypatch, capsys):
-    out = loop_output(loops, "loop", monkeypatch)    # media create loop --patches 1000 --json
+def test_media_create_runs_the_loop_in_minutes(library, capsys):
+    assert main(["media", "create", "loop", "--patches", "1000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
     assert out["seconds"] < 600
     assert out["profcheck"]["mean"] <= 1.0
     m = medialib.find("loop")
@@ -285,7 +262,7 @@ def test_each_dpi_mode_of_an_entry_has_its_own_curves_and_budget(library):
 
 
 @needs_argyll
-def test_every_dpi_mode_prints_the_same_colour(profile, loops, monkeypatch):
+def test_every_dpi_mode_prints_the_same_colour(profile, background, monkeypatch):
     """One entry at 300 dpi (budget 0.5: 150 dpi's ink) with modes 150 and 600, each
     linearised and profiled in its mode: the same control chart within ΔE2000 1.5 mean of
     each other; 300 and 600 dpi also within 5 % of the same ink per m² (150 dpi needs
@@ -293,7 +270,7 @@ def test_every_dpi_mode_prints_the_same_colour(profile, loops, monkeypatch):
     import itertools
     from wideprint.device_sim.spectral import delta_e2000
     # media create modes --patches 600 --drop-budget 0.5 --modes 150,600 --json
-    loop_output(loops, "modes", monkeypatch)
+    background_loop(background, "media-modes", monkeypatch)
     m = medialib.find("modes")
     assert sorted(m.values["modes"]) == ["150", "600"] and m.values["drop_budget"] == {"300": 0.5}
     kept = {}
@@ -350,11 +327,11 @@ def test_charts_measured_outside_wideprint_are_waited_for(tmp_path, profile):
 
 
 @needs_argyll
-def test_a_media_made_from_scans_is_within_2_5(loops, monkeypatch, capsys):
+def test_a_media_made_from_scans_is_within_2_5(background, monkeypatch, capsys):
     """media create --scan: the scanner characterised on this media (a chart measured by
     the spectrophotometer and scanned once), every chart then measured by scans only; the
     spectrophotometer verifies: mean ΔE2000 <= 2.5 (issue 33)."""
-    out = loop_output(loops, "scanned", monkeypatch)     # media create scanned --scan --json
+    out = background_loop(background, "media-scanned", monkeypatch)
     assert out["scanner_icc"].endswith("scanner.icc") and out["profcheck"]["mean"] <= 1.0
     m = medialib.find("scanned")
     assert (m.folder / "scanner.icc").is_file() and (m.folder / "scanner.ti3").is_file()
