@@ -68,7 +68,7 @@ def test_command_line_gives_only_what_was_typed():
     ({"bidir": 1}, "bidir must be true or false"),
     ({"ink_limit": 0.5}, "ink_limit 0.5 is out of range (1..400)"),
     ({"ink_limit": float("nan")}, "ink_limit must be a finite number"),
-    ({"dither": "magic"}, "dither must be one of vced, vector, fs, jarvis"),
+    ({"dither": "magic"}, "dither must be one of vced, vector, dbs, fs, jarvis"),
     ({"intent": 3}, "intent must be a string"),
     ({"input_icc": 7}, "input_icc must be a string"),
     ({"placement": {"rotate": 45}}, "placement rotate must be one of 0, 90, 180, 270"),
