@@ -328,11 +328,14 @@ def _probe_args(path: str, fmt: str, nonce: str) -> list[str]:
         return [*common, "-dNODISPLAY", f"--permit-file-read={path}", f"-sWPFile={path}", "-c", prog]
     hook = (f"<< /EndPage {{ exch pop 2 ne {{ ({nonce} page ) print currentpagedevice /PageSize get "
             "{ =only ( ) print } forall (\\n) print flush false } { false } ifelse } bind >> setpagedevice "
-            # the spot colours the program sets (docs/spot.md): Separation and DeviceN names
-            f"/setcolorspace {{ dup type /arraytype eq {{ dup length 1 gt {{ dup 0 get dup /Separation eq "
-            f"{{ pop ({nonce} spot separation ) print dup 1 get =only (\\n) print }} {{ /DeviceN eq "
-            f"{{ dup 1 get {{ ({nonce} spot devicen ) print =only (\\n) print }} forall }} if }} ifelse }} if }} if "
-            "//setcolorspace } bind def")
+            # the spot colours the program sets (docs/spot.md): each Separation and DeviceN
+            # name once (a program that sets its colour space at every object must not
+            # flood the output, whose first 64 KiB hold the page sizes)
+            f"/WPspots 64 dict def /WPspot {{ 1 index WPspots exch known {{ pop pop }} {{ 1 index WPspots "
+            f"exch true put ({nonce} spot ) print print ( ) print =only (\\n) print }} ifelse }} bind def "
+            "/setcolorspace { dup type /arraytype eq { dup length 1 gt { dup 0 get dup /Separation eq "
+            "{ pop dup 1 get (separation) WPspot } { /DeviceN eq { dup 1 get { (devicen) WPspot } forall } "
+            "if } ifelse } if } if //setcolorspace } bind def")
     args = [*common, "-sDEVICE=nullpage", "-r72"]
     if fmt == "eps":
         args.append("-dEPSCrop")

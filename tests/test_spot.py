@@ -397,3 +397,19 @@ def test_cut_colour_in_forms_text_and_fill_and_stroke(spots_dir, tmp_path):
         under = im[int((144 - 118) / 144 * h):int((144 - 72) / 144 * h), int(112 / 216 * w):int(190 / 216 * w)]
         assert (under == under[0, 0]).all() and under[0, 0, 0] > 100
         assert np.nonzero(im[..., 3].any(axis=0))[0].min() == pytest.approx((110 + 82.2 + 3) / 216 * w, abs=3)
+
+
+def test_a_program_setting_its_spot_at_every_object_probes_each_name_once(tmp_path):
+    """Illustrator's PostScript sets the colour space at every object: the probe names each
+    spot once, so the page sizes (in the probe's first 64 KiB of output) are still read."""
+    from wideprint.rip.ghostscript import probe
+    ps = tmp_path / "many.ps"
+    ps.write_text("%!PS\n<< /PageSize [216 144] >> setpagedevice\n"
+                  + "[/Separation (Brand Red) /DeviceCMYK {dup 0 exch 0.5 mul 0}] setcolorspace 0.5 setcolor "
+                    "10 10 60 124 rectfill\n" * 2000          # 90 KB of output if each were said
+                  + "[/DeviceN [/Cyan /Spot2] /DeviceCMYK {pop 0 0 0}] setcolorspace 1 1 setcolor "
+                    "80 10 20 20 rectfill\nshowpage\n")
+    seen: dict[str, str] = {}
+    pages, _ = probe(str(ps), "ps", "crop", spots=seen)
+    assert [(p.width_pt, p.height_pt) for p in pages] == [(216.0, 144.0)]
+    assert seen == {"Brand Red": "separation", "Cyan": "devicen", "Spot2": "devicen"}

@@ -295,6 +295,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_postscript_spots_go_the_same_way",  # 1.9
         "test_devicen_mixes_library_recipes_and_process_inks",  # 0.9
         "test_cut_colour_in_forms_text_and_fill_and_stroke",  # 0.9
+        "test_a_program_setting_its_spot_at_every_object_probes_each_name_once",  # 1.5
         "test_a_cut_line_neither_prints_nor_knocks_out",  # 1.1
         "test_a_document_without_library_or_cut_colours_is_not_rewritten",  # 0.9
         "test_swatch_book_round_trip",  # 0.8
