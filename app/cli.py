@@ -434,7 +434,7 @@ def cmd_print(args) -> int:
                 continue
             cut_report = None
             if args.cut_out:                    # before printing: a file without cut paths is said
-                from ..rip.cut import write_job_cut
+                from ..rip.cutfile import write_job_cut
                 try:
                     cut_report = write_job_cut(str(_media_path(args.cut_out, i, len(files))), rip,
                                                settings, profile)

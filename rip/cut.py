@@ -20,7 +20,6 @@ so the chord error is stated on the media: at most `CHORD_MM` (0.01 mm).
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import subprocess
@@ -35,7 +34,7 @@ from .cutnames import is_cut_name
 from .settings import MM_PER_INCH
 
 __all__ = ["CHORD_MM", "CutPath", "CutJob", "RawPath", "extract_pdf", "page_to_sheet",
-           "flatten", "cut_job"]
+           "flatten", "cut_job", "wants_cut_marks"]
 
 #: the largest distance between a flattened polyline and its Bézier, millimetres of the media
 CHORD_MM = 0.01
@@ -425,55 +424,3 @@ def wants_cut_marks(settings):
     if pl.marks != "none":
         return settings
     return _replace(settings, placement=_replace(pl, marks="cut"))
-
-
-def write_job_cut(path: str, rip, settings, profile, patterns: Iterable[str] | None = None) -> dict:
-    """The cut file of a RipJob (rip/pipeline.py) at `path` (.plt/.hpgl: HP-GL/2, .dxf:
-    DXF); returns the report's `cut` entry: file, format, paths, length, marks."""
-    from .cutfile import write_cut_file
-    plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
-    files = [rip.path, *getattr(rip, "more", ())]
-    job = cut_job(files if plan is not None else rip.path, settings, profile, patterns, plan)
-    fmt = write_cut_file(path, job)
-    length = sum(float(np.hypot(*np.diff(p.points, axis=0).T).sum()) for p in job.paths)
-    return dict(file=path, format=fmt, paths=len(job.paths), length_mm=round(length, 3),
-                marks=len(job.marks), width_mm=round(job.width_mm, 3), height_mm=round(job.height_mm, 3),
-                names=sorted({p.name for p in job.paths}), chord_mm=CHORD_MM)
-
-
-#: the cut files a print server keeps for a job (docs/cut.md, "Through the print server")
-SERVER_CUT_FILES = ("cut.plt", "cut.dxf")
-
-
-def server_cut_path(state_dir, job_id: int, name: str) -> str:
-    """Where the print server keeps a job's cut file `name` (one of SERVER_CUT_FILES)."""
-    return os.path.join(os.fspath(state_dir), "cut", f"{int(job_id)}-{name}")
-
-
-def write_cut_files(state_dir, job_id: int, rip, settings, profile) -> dict:
-    """A server job's cut files, HP-GL/2 and DXF, from one extraction; the `cut` report.
-    `rip` is the job's RipJob, or its list of files (they are laid out as it would be)."""
-    from .cutfile import write_cut_file
-    if isinstance(rip, (list, tuple)):
-        from .layout import plan_layout, wants_layout
-        files = [os.fspath(f) for f in rip]
-        plan = plan_layout(files, settings, profile) if wants_layout(settings.placement, files[1:]) else None
-    else:
-        plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
-        files = [rip.path, *getattr(rip, "more", ())]
-    job = cut_job(files if plan is not None else files[0], settings, profile, None, plan)
-    folder = os.path.join(os.fspath(state_dir), "cut")
-    os.makedirs(folder, exist_ok=True)
-    for name in SERVER_CUT_FILES:
-        # written aside under a name of its own (the worker and an API request may write
-        # the same job's file at once), then renamed into place
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{int(job_id)}-", suffix=os.path.splitext(name)[1])
-        os.close(fd)
-        try:
-            write_cut_file(tmp, job)
-            os.replace(tmp, server_cut_path(state_dir, job_id, name))
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
-    return dict(paths=len(job.paths), marks=len(job.marks), files=list(SERVER_CUT_FILES))

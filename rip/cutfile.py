@@ -20,15 +20,19 @@ printer, printed side up), `y` along the feed (the direction the media leaves th
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import tempfile
+from typing import Iterable
 
 import numpy as np
 
-from .cut import CutJob
+from .cut import CHORD_MM, CutJob, cut_job
 
 __all__ = ["UNITS_PER_MM", "CUT_FORMATS", "cut_format", "write_cut_file", "write_hpgl",
-           "write_dxf", "read_cut_file", "read_hpgl", "parse_hpgl", "read_dxf"]
+           "write_dxf", "read_cut_file", "read_hpgl", "parse_hpgl", "read_dxf", "write_job_cut",
+           "SERVER_CUT_FILES", "server_cut_path", "write_cut_files"]
 
 UNITS_PER_MM = 40                      # HP-GL plotter units (0.025 mm)
 CUT_FORMATS = {".plt": "hpgl", ".hpgl": "hpgl", ".hpg": "hpgl", ".dxf": "dxf"}
@@ -155,3 +159,55 @@ def read_dxf(path: str) -> tuple[list[np.ndarray], list[tuple[str, float, float]
 
 def read_cut_file(path: str) -> tuple[list[np.ndarray], list[tuple[str, float, float]]]:
     return (read_hpgl if cut_format(path) == "hpgl" else read_dxf)(path)
+
+
+# -- a job's cut files (rip/cut.py extracts, this module writes) ---------------------------
+
+def write_job_cut(path: str, rip, settings, profile, patterns: Iterable[str] | None = None) -> dict:
+    """The cut file of a RipJob (rip/pipeline.py) at `path` (.plt/.hpgl: HP-GL/2, .dxf:
+    DXF); returns the report's `cut` entry: file, format, paths, length, marks."""
+    plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
+    files = [rip.path, *getattr(rip, "more", ())]
+    job = cut_job(files if plan is not None else rip.path, settings, profile, patterns, plan)
+    fmt = write_cut_file(path, job)
+    length = sum(float(np.hypot(*np.diff(p.points, axis=0).T).sum()) for p in job.paths)
+    return dict(file=path, format=fmt, paths=len(job.paths), length_mm=round(length, 3),
+                marks=len(job.marks), width_mm=round(job.width_mm, 3), height_mm=round(job.height_mm, 3),
+                names=sorted({p.name for p in job.paths}), chord_mm=CHORD_MM)
+
+
+#: the cut files a print server keeps for a job (docs/cut.md, "Through the print server")
+SERVER_CUT_FILES = ("cut.plt", "cut.dxf")
+
+
+def server_cut_path(state_dir, job_id: int, name: str) -> str:
+    """Where the print server keeps a job's cut file `name` (one of SERVER_CUT_FILES)."""
+    return os.path.join(os.fspath(state_dir), "cut", f"{int(job_id)}-{name}")
+
+
+def write_cut_files(state_dir, job_id: int, rip, settings, profile) -> dict:
+    """A server job's cut files, HP-GL/2 and DXF, from one extraction; the `cut` report.
+    `rip` is the job's RipJob, or its list of files (they are laid out as it would be)."""
+    if isinstance(rip, (list, tuple)):
+        from .layout import plan_layout, wants_layout
+        files = [os.fspath(f) for f in rip]
+        plan = plan_layout(files, settings, profile) if wants_layout(settings.placement, files[1:]) else None
+    else:
+        plan = rip.layout.plan if getattr(rip, "layout", None) is not None else None
+        files = [rip.path, *getattr(rip, "more", ())]
+    job = cut_job(files if plan is not None else files[0], settings, profile, None, plan)
+    folder = os.path.join(os.fspath(state_dir), "cut")
+    os.makedirs(folder, exist_ok=True)
+    for name in SERVER_CUT_FILES:
+        # written aside under a name of its own (the worker and an API request may write
+        # the same job's file at once), then renamed into place
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{int(job_id)}-", suffix=os.path.splitext(name)[1])
+        os.close(fd)
+        try:
+            write_cut_file(tmp, job)
+            os.replace(tmp, server_cut_path(state_dir, job_id, name))
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+    return dict(paths=len(job.paths), marks=len(job.marks), files=list(SERVER_CUT_FILES))

@@ -850,7 +850,7 @@ class ApiHandler(BaseHTTPRequestHandler):
         not ripped yet (queued, held: its settings may have been edited), made now from its
         spooled file (the GUI's preview)."""
         import os
-        from ...rip.cut import server_cut_path, write_cut_files
+        from ...rip.cutfile import server_cut_path, write_cut_files
         from .validate import job_rip_settings
         path = server_cut_path(self.srv.state_dir, job_id, name)
         job = self.srv.spool.get(job_id)

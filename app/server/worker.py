@@ -583,7 +583,7 @@ class Worker(threading.Thread):
                                  names=(job["name"], *(m["name"] for m in members)))
                 layout = rip.layout.report if rip.layout is not None else None
                 if rs.placement.marks == "cut" and cp is None:     # print and cut (docs/cut.md)
-                    from ...rip.cut import write_cut_files
+                    from ...rip.cutfile import write_cut_files
                     write_cut_files(self.srv.state_dir, job_id, rip, rs, media_profile)
             except (ImageError, ValueError, OSError) as exc:
                 msg = str(exc).replace(job["spool_path"] or "", job["name"])
