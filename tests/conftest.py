@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 # the shared helpers live in tests/support, and test files import them from there
 # (tests/test_support.py); this file turns them into fixtures
-from support.background import Background, start_declared  # noqa: E402
+from support.background import Background, declared  # noqa: E402
 from support.server import ServerProcess, inprocess_server  # noqa: E402
 
 
@@ -58,10 +58,11 @@ def pytest_collection_modifyitems(config, items):
 def pytest_collection_finish(session):
     """The long single-threaded computations that the run's tests declare (BACKGROUND in
     their module, tests/support/background.py) start now, at the lowest priority."""
-    if session.config.option.collectonly or not session.items:
-        return
-    session.config._wideprint_background = Background()
-    start_declared(session.items, session.config._wideprint_background)
+    entries = [] if session.config.option.collectonly else declared(session.items)
+    if entries:
+        session.config._wideprint_background = bg = Background()
+        for key, argv, env in entries:
+            bg.submit(key, argv, env)
 
 
 def pytest_sessionfinish(session):

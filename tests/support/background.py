@@ -9,13 +9,15 @@ module declares those computations in a module-level dict::
     BACKGROUND = {"test_function_name": ("key", [argv...], {"ENV": "value"})}
 
 and tests/conftest.py queues every one whose test is in the run as soon as collection ends
-(`start_declared`), in the order of their tests: they run two at a time (RUNNERS), each a
+(`declared`), in the order of their tests: they run two at a time (RUNNERS), each a
 process at niceness 19, so each takes only the CPU the other tests do not want and slows
-neither them nor their timing assertions, and the ones needed first are done first.  The test takes the
-result with the `background` fixture (`background.output(key)`), starting it at once if
-its turn has not come and waiting for it if it is not done (it then has the core to
-itself).  A computation whose own duration a test asserts does not belong here: its figure
-would be the idle core's, not the machine's.  In argv and env values, `{dir}` is a folder of the key's own."""
+neither them nor their timing assertions, and the ones needed first are done first.  The
+test takes the result with the `background` fixture (`background.output(key)`), starting
+it at once if its turn has not come and waiting for it if it is not done (the process then
+runs at the ordinary priority where the user may raise it: it is what the run waits for).
+A computation whose own duration a test asserts does not belong here: its figure would be
+the idle core's, not the machine's.  In argv and env values, `{dir}` is a folder of the
+key's own."""
 
 from __future__ import annotations
 
@@ -89,6 +91,11 @@ class Background:
             assert any(k == key for k, _, _ in self.queue), \
                 f"{key}: not queued (its test is not in a BACKGROUND?)"
             proc = self._start(key)
+        if proc.poll() is None:                  # a test waits for it: no longer background
+            try:
+                os.setpriority(os.PRIO_PROCESS, proc.pid, 0)
+            except OSError:
+                pass                             # lowering a niceness needs CAP_SYS_NICE
         rc = proc.wait(timeout=timeout)
         assert rc == 0, f"{key} exited {rc}:\n" + (self.folder(key) / "err").read_text()
         return (self.folder(key) / "out").read_text()
@@ -104,12 +111,13 @@ class Background:
         shutil.rmtree(self.root, ignore_errors=True)
 
 
-def start_declared(items, background: Background) -> None:
-    """Queue the BACKGROUND entries of the test modules whose tests are among `items`, in
-    their order."""
+def declared(items) -> list[tuple[str, list[str], dict[str, str]]]:
+    """The BACKGROUND entries of the test modules whose tests are among `items`, in their
+    order."""
+    out = []
     for item in items:
-        declared = getattr(getattr(item, "module", None), "BACKGROUND", None)
+        table = getattr(getattr(item, "module", None), "BACKGROUND", None)
         name = getattr(item, "originalname", None) or item.name
-        if declared and name in declared:
-            key, argv, env = declared[name]
-            background.submit(key, argv, env)
+        if table and name in table:
+            out.append(table[name])
+    return out
