@@ -35,6 +35,7 @@ GRAIN_CUT = 0.4             # cycles/mm: graininess above, mottle below (ISO 136
 MOTTLE_LOW = 0.1            # cycles/mm: mottle's lowest frequency (a 10 mm wavelength)
 INSET_MM = 0.5              # the strip's edges left out (the scanner's blur, a slight rotation)
 GAP_MM = 2.0                # paper across a strip shorter than this is a defect, not its end
+DETECT_BLUR_MM = 0.2        # the lightness smoothed this much (sigma) to find the strips
 MIN_STRIP_MM = 3.0          # a run of ink narrower than this is not a strip
 MIN_LENGTH_MM = 8.0         # ... or shorter along the feed
 INK_DL = 4.0                # a pixel this much darker than paper (L*) holds ink
@@ -122,12 +123,16 @@ class Strip:
 def find_strips(lightness: np.ndarray, pix_mm: float) -> list[Strip]:
     """Runs of ink columns at least MIN_STRIP_MM wide, split by paper, each with the
     longest run of inked rows down its middle; the edges inset by INSET_MM."""
-    ink = lightness < (100.0 - INK_DL)
+    import cv2
+    # a tint's dots and the paper between them, smoothed to its mean: a light tint at a
+    # fine scan is mostly paper pixels
+    smooth = cv2.GaussianBlur(lightness.astype(np.float32), (0, 0), DETECT_BLUR_MM / pix_mm)
+    ink = smooth < (100.0 - INK_DL)
     rows_inked = ink.mean(axis=1) > 0.02
     if not rows_inked.any():
         raise QualityError("no ink in the scan")
     cols = ink[rows_inked].mean(axis=0) > 0.5
-    inset = int(round(INSET_MM / pix_mm))
+    inset = int(round((INSET_MM + DETECT_BLUR_MM) / pix_mm))     # the blur widens the runs
     strips: list[Strip] = []
     for a, b in _runs(cols):
         if (b - a) * pix_mm < MIN_STRIP_MM:
