@@ -1,2 +1,11 @@
 """Helpers shared by the tests (imported as `support.<module>`: conftest.py puts tests/ on
-sys.path).  Nothing here is part of the wideprint package."""
+sys.path; tests/test_support.py keeps test files from importing conftest or each other).
+Nothing here is part of the wideprint package.
+
+- images: test planes, CMYK TIFFs on the device grid, the repository root
+- server: the print server in process and as a process, the standalone emulator
+- printing: a job on the in-process emulator, variant printer profiles, replay
+- gui: the GUI tests' server and window
+- background: long single-threaded computations run at the lowest priority
+- marks: which tests are slow, system or gui
+- cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree"""
