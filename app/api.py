@@ -61,6 +61,21 @@ def rip_settings(settings: Any = None, profile: Profile | None = None, **kw: Any
     return from_mapping(merge(dict(settings or {}), flat), profile)
 
 
+def _media_job(settings: Any, profile: Profile, kw: dict) -> tuple[RipSettings, Profile]:
+    """(RipSettings, profile) of a job whose settings may name a `media` (docs/media.md "A
+    job's media"): the media's print mode under the settings given, its ICC and its ink
+    limit, curves and drop budget, as `wideprint print --media` applies them."""
+    from ..rip.settings import RipSettings as _Rs
+    if isinstance(settings, _Rs) or not ((settings or {}).get("media") or kw.get("media")):
+        return rip_settings(settings, profile, **kw), profile
+    from ..rip.settings import PLACEMENT_KEYS, merge
+    from .medialib import resolve
+    flat: dict[str, Any] = {"placement": {k: v for k, v in kw.items() if k in PLACEMENT_KEYS}}
+    flat.update({k: v for k, v in kw.items() if k not in PLACEMENT_KEYS})
+    profile, mapping = resolve(merge(dict(settings or {}), flat), profile)
+    return rip_settings(mapping, profile), profile
+
+
 def read_planes(path: str | Path) -> np.ndarray:
     """A planes or media TIFF (docs/formats.md) as uint8 (rows, columns, 4): C, M, Y, K
     drops per dot."""
@@ -74,7 +89,7 @@ def rip(file: str | Path, settings: Any = None, *, profile: Profile | None = Non
     also written to `out` when given.  Raises rip.load.ImageError for a file it cannot read."""
     from ..rip.pipeline import RipJob
     profile = profile if profile is not None else load_profile()
-    rs = rip_settings(settings, profile, **kw)
+    rs, profile = _media_job(settings, profile, kw)
     with tempfile.TemporaryDirectory(prefix="wideprint-rip-") as d:
         target = Path(out) if out else Path(d) / "planes.tif"
         job = RipJob(str(file), rs, profile)
@@ -166,10 +181,10 @@ class EmulatedPrinter:
         only for settings that are refused (ValueError)."""
         from ..rip.load import ImageError
         from ..rip.pipeline import RipJob
-        rs = rip_settings(settings, self.profile, **kw)
-        result = PrintResult(file=str(file), state="failed", settings=rs, profile=self.profile)
+        rs, profile = _media_job(settings, self.profile, kw)
+        result = PrintResult(file=str(file), state="failed", settings=rs, profile=profile)
         try:
-            job = RipJob(str(file), rs, self.profile)
+            job = RipJob(str(file), rs, profile)
         except (ImageError, ValueError, OSError) as exc:
             self.jobs += 1
             result.message = str(exc)

@@ -544,3 +544,30 @@ def test_the_printer_application_is_not_built_or_pappl_missing_is_loud(tmp_path)
                         str(free_port())], capture_output=True, text=True, env=env, timeout=60)
     assert r.returncode == 1
     assert "not built" in r.stderr and "libpappl-dev" in r.stderr
+
+
+def test_media_type_is_the_media_library_and_a_job_may_name_one(ipp, tmp_path):
+    """docs/ipp.md "Media": media-type-supported is stationery and the server's media
+    library (docs/media.md); a job whose media-col names a media entry prints with it
+    (settings.media), bit-exact as the RIP prints that media; stationery is no media."""
+    deadline = time.monotonic() + 10                  # the bridge says it within a poll
+    while True:
+        a = attrs(ipptool(ipp.uris["left"], IPPTOOL_DIR / "get-printer-attributes.test")["Tests"][0])
+        types = a["media-type-supported"]
+        types = [types] if isinstance(types, str) else types
+        if "vinyl-300" in types or time.monotonic() > deadline:
+            break
+        time.sleep(0.3)
+    assert types[0] == "stationery" and "vinyl-300" in types, types
+    tif = write_cmyk_tiff(tmp_path / "typed.tif", random_planes(60, 80, seed=8))
+    media_col = """  ATTR collection media-col {
+    MEMBER keyword media-type "vinyl-300"
+  }"""
+    print_job(tmp_path, ipp.auth_uri["left"], tif, "image/tiff", "typed.tif", media_col)
+    job = wait_job(ipp.client, "typed.tif")
+    assert job["settings"].get("media") == "vinyl-300", job["settings"]
+    assert_bit_exact(ipp, job, tif, "left")
+    plain = write_cmyk_tiff(tmp_path / "plain.tif", random_planes(60, 80, seed=9))
+    print_job(tmp_path, ipp.auth_uri["left"], plain, "image/tiff", "plain.tif",
+              media_col.replace("vinyl-300", "stationery"))
+    assert "media" not in wait_job(ipp.client, "plain.tif")["settings"]

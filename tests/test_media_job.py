@@ -83,3 +83,19 @@ def test_a_request_naming_a_media_the_server_lacks_is_refused(server):
     with pytest.raises(ApiError) as err:
         client.submit(src, settings={"media": "../etc"})
     assert err.value.status == 400 and "media name" in str(err.value)
+
+
+def test_the_python_api_applies_a_media_as_the_command_line_does(tmp_path, monkeypatch):
+    from wideprint.app import api
+    library = tmp_path / "library"
+    thin_media(library)
+    monkeypatch.setenv("WIDEPRINT_MEDIA_DIR", str(library))
+    src = dark_rgb(tmp_path / "dark.png")
+    planes = api.rip(src, {"media": "thin-300"}, size="pixels")
+    env = {**os.environ, "WIDEPRINT_MEDIA_DIR": str(library)}
+    r = subprocess.run([sys.executable, "-m", "wideprint.app.cli", "rip", str(src), "-o",
+                        str(tmp_path / "cli.tif"), "--size", "pixels", "--media", "thin-300"],
+                       env=env, capture_output=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert np.array_equal(planes, read_planes(tmp_path / "cli.tif"))
+    assert not np.array_equal(planes, api.rip(src, size="pixels"))

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import shutil
 import subprocess
 import threading
@@ -69,16 +70,29 @@ def web_url(host: str | None, port: int | None) -> str:
     return f"http://{host}:{port}/"
 
 
-def media_line(printer: dict, profile_width_mm: float) -> str:
+def media_line(printer: dict, profile_width_mm: float, media_types: tuple = ()) -> str:
     """The paper loaded on a printer, for its IPP media attributes (docs/ipp.md "The paper"):
-    `media NAME WIDTH_MM LENGTH_MM`.  The width: the tracked roll's, else the printer's
-    last measurement (its edge sensors), else the profile's paper; the length: what is left
-    of the tracked roll, 0 when nobody knows it."""
+    `media NAME WIDTH_MM LENGTH_MM ROLL_MEDIA TYPES`.  The width: the tracked roll's, else
+    the printer's last measurement (its edge sensors), else the profile's paper; the length:
+    what is left of the tracked roll, 0 when nobody knows it; the roll's media entry (empty
+    when none is named) and the media library's entries, comma separated: the printer's
+    media-type values (docs/ipp.md "Media")."""
     roll = printer.get("roll") or {}
     width = roll.get("width_mm") or printer.get("paper_mm") or profile_width_mm
     left = roll.get("remaining_mm")
     length = int(left) if isinstance(left, (int, float)) and left > 0 else 0
-    return "\t".join(["media", _field(printer["name"]), str(int(round(width))), str(length)])
+    on_roll = roll.get("media") if roll.get("media") in media_types else ""
+    return "\t".join(["media", _field(printer["name"]), str(int(round(width))), str(length),
+                      on_roll or "", ",".join(media_types)])
+
+
+def ipp_media_types(library: Path | None = None) -> tuple[str, ...]:
+    """The media library's entries that can be IPP media-type keywords (lower-case letters,
+    digits, '-', '_', '.'; RFC 8011 keyword syntax), at most 15 (PAPPL's list, "stationery"
+    first)."""
+    from ..medialib import list_media
+    names = [m.name for m in list_media(library)]
+    return tuple(n for n in names if re.fullmatch(r"[a-z][a-z0-9._-]*", n))[:15]
 
 
 def job_name(ipp_name: str, fmt: str) -> str:
@@ -103,7 +117,7 @@ def requesting_user(user: str) -> str:
 
 
 def ipp_job_fields(*, copies: int, quality: str, xdpi: int, orientation: int, intent: str,
-                   presets, dpi_modes) -> dict:
+                   presets, dpi_modes, media_type: str = "", media_types: tuple = ()) -> dict:
     """The wideprint job description fields for a job's IPP options (docs/ipp.md, "What an
     IPP job's options become"): copies; print-quality -> a preset (when the server has it);
     printer-resolution (when the client chose one) -> dpi; orientation-requested -> rotate;
@@ -126,6 +140,8 @@ def ipp_job_fields(*, copies: int, quality: str, xdpi: int, orientation: int, in
     rotate = ORIENTATION_ROTATE.get(orientation, 0)
     if rotate:
         settings["placement"] = {"rotate": rotate}
+    if media_type in media_types:              # media-col media-type: a media entry
+        settings["media"] = media_type
     if settings:
         fields["settings"] = settings
     return fields
@@ -291,7 +307,7 @@ class IppBridge:
         for line in self.proc.stdout:
             f = line.rstrip("\n").split("\t")
             try:
-                if f[0] == "submit" and len(f) == 12:
+                if f[0] == "submit" and len(f) == 13:
                     threading.Thread(target=self._submit, args=(f[1:],), daemon=True,
                                      name=f"ipp-submit-{f[1]}").start()
                 elif f[0] == "cancel" and len(f) == 2:
@@ -309,8 +325,14 @@ class IppBridge:
         if not self._stop.is_set():
             log.error("%s stopped (exit code %s)", BINARY_NAME, self.proc.wait())
 
+    def _media_types(self) -> tuple[str, ...]:
+        """The server's media library as IPP media-type values (STATE/media, shipped)."""
+        from ..medialib import user_dir
+        return ipp_media_types(user_dir(self.state_dir))
+
     def _submit(self, f: list[str]) -> None:
-        tag, printer, fmt, path, copies, quality, xdpi, orientation, intent, user, name = f
+        tag, printer, fmt, path, copies, quality, xdpi, orientation, intent, user, name = f[:11]
+        media_type = f[11] if len(f) > 11 else ""
         from ..client import ApiError
         # the job belongs to the IPP requesting-user-name (docs/server.md "Users and roles")
         client = self._client(user=requesting_user(user))
@@ -318,7 +340,8 @@ class IppBridge:
             fields = ipp_job_fields(copies=int(copies), quality=quality, xdpi=int(xdpi),
                                     orientation=int(orientation), intent=intent,
                                     presets=client.presets()["presets"],
-                                    dpi_modes=self._dpi.get(printer, ()))
+                                    dpi_modes=self._dpi.get(printer, ()),
+                                    media_type=media_type, media_types=self._media_types())
             job = client.submit(path, name=job_name(name, fmt), printer=printer,
                                 client=("ipp:" + (user or "anonymous"))[:100],
                                 key=f"ipp-{uuid.uuid4()}", **fields)["job"]
@@ -357,7 +380,8 @@ class IppBridge:
             try:
                 for p in client.printers():
                     for line in (printer_line(p),
-                                 media_line(p, self._paper.get(p["name"], 0.0))):
+                                 media_line(p, self._paper.get(p["name"], 0.0),
+                                            self._media_types())):
                         key = (p["name"], line.split("\t", 1)[0])
                         if sent_printers.get(key) != line:
                             self._send(line)

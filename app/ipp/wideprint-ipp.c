@@ -41,6 +41,8 @@
 
 // -- configuration and state ----------------------------------------------------------------
 
+#define WP_MAX_TYPES 16			// media-type values offered (PAPPL keeps 32)
+
 typedef struct wp_printer_s		// One printer of the wideprint server
 {
   char		name[64];		// its name on the server (the IPP printer's name too)
@@ -55,6 +57,12 @@ typedef struct wp_printer_s		// One printer of the wideprint server
 		default_dpi;
   char		media_names[2][16][64];	// storage for the driver's media names: two banks,
   int		bank, num_media;	// the one in use and the one rewritten on a change
+  // media-type: "stationery" and the server's media library (docs/media.md), the loaded
+  // roll's media (docs/ipp.md "The paper"); names kept in two banks like the sizes
+  char		type_names[2][WP_MAX_TYPES][64],
+		roll_type[64];		// the loaded roll's media ("": none named)
+  int		num_types;
+  char		types[WP_MAX_TYPES][64];	// from the bridge's media line
   pappl_printer_t *printer;		// the PAPPL printer
   // state from the server (bridge "printer" lines)
   char		state[32];		// idle, printing, offline, fault
@@ -349,7 +357,7 @@ submit_and_wait(pappl_job_t *job, wp_printer_t *p, const char *path, const char 
   ipp_attribute_t	*attr;
   int			xdpi = 0, seen = 0, copies_seen = 0;
   bool			cancel_sent = false, ok;
-  char			jobname[256], user[256];
+  char			jobname[256], user[256], media_type[64];
   const char		*quality, *intent;
 
   // printer-resolution only when the client asked for one: otherwise the preset decides
@@ -374,8 +382,10 @@ submit_and_wait(pappl_job_t *job, wp_printer_t *p, const char *path, const char 
 
   papplJobSetImpressions(job, copies);
   papplJobSetMessage(job, "Sending the document to the wideprint queue.");
-  send_line("submit\t%d\t%s\t%s\t%s\t%d\t%s\t%d\t%d\t%s\t%s\t%s", t->tag, p->name, format, path,
-            copies, quality, xdpi, (int)options->orientation_requested, intent, user, jobname);
+  clean_field(media_type, options->media.type, sizeof(media_type));
+  send_line("submit\t%d\t%s\t%s\t%s\t%d\t%s\t%d\t%d\t%s\t%s\t%s\t%s", t->tag, p->name, format, path,
+            copies, quality, xdpi, (int)options->orientation_requested, intent, user, jobname,
+            media_type);
 
   pthread_mutex_lock(&io_lock);
   for (;;)
@@ -763,7 +773,7 @@ extra_attrs(wp_printer_t *p)		// what PAPPL 1.3 does not make from the driver da
     ippAddCollection(col, IPP_TAG_ZERO, "media-size", size);
     ippAddString(col, IPP_TAG_ZERO, IPP_CONST_TAG(IPP_TAG_KEYWORD), "media-source", NULL, "main-roll");
     ippAddInteger(col, IPP_TAG_ZERO, IPP_TAG_INTEGER, "media-top-margin", 0);
-    ippAddString(col, IPP_TAG_ZERO, IPP_CONST_TAG(IPP_TAG_KEYWORD), "media-type", NULL, "stationery");
+    ippAddString(col, IPP_TAG_ZERO, IPP_TAG_KEYWORD, "media-type", NULL, p->roll_type[0] ? p->roll_type : "stationery");
     ippAddCollection(attrs, IPP_TAG_PRINTER, "media-col-ready", col);
     ippDelete(size);
     ippDelete(col);
@@ -803,10 +813,12 @@ publish(wp_printer_t *p)		// the paper and the state in words, to PAPPL
 
 
 static void
-media_update(char **f, int n)		// media NAME WIDTH_MM LENGTH_MM (0: unknown)
+media_update(char **f, int n)		// media NAME WIDTH_MM LENGTH_MM [ROLL_MEDIA [TYPES]]
 {
   wp_printer_t	*p;
-  int		width, length;
+  int		width, length, num_types = 0;
+  char		types[WP_MAX_TYPES][64], roll_type[64] = "", list[1024], *t, *save = NULL;
+  bool		same_types;
 
   if (n < 4 || (p = find_printer(f[1])) == NULL || !p->printer)
     return;
@@ -814,10 +826,28 @@ media_update(char **f, int n)		// media NAME WIDTH_MM LENGTH_MM (0: unknown)
   length = atoi(f[3]);
   if (width < 25 || width > p->print_mm || length < 0)
     return;				// not a paper this printer can hold: keep what was said
-  if (width == p->roll_mm && length == p->roll_len_mm)
+  if (n >= 5)
+    papplCopyString(roll_type, f[4], sizeof(roll_type));
+  if (n >= 6)				// the library: media names, comma separated
+  {
+    papplCopyString(list, f[5], sizeof(list));
+    for (t = strtok_r(list, ",", &save); t && num_types < WP_MAX_TYPES; t = strtok_r(NULL, ",", &save))
+      if (*t)
+        papplCopyString(types[num_types ++], t, sizeof(types[0]));
+  }
+  else
+  {
+    num_types = p->num_types;
+    memcpy(types, p->types, sizeof(types));
+  }
+  same_types = num_types == p->num_types && !memcmp(types, p->types, sizeof(types[0]) * (size_t)num_types);
+  if (width == p->roll_mm && length == p->roll_len_mm && !strcmp(roll_type, p->roll_type) && same_types)
     return;
   p->roll_mm     = width;
   p->roll_len_mm = length;
+  papplCopyString(p->roll_type, roll_type, sizeof(p->roll_type));
+  p->num_types = num_types;
+  memcpy(p->types, types, sizeof(types));
   publish(p);
 }
 
@@ -1028,6 +1058,18 @@ fill_media(wp_printer_t *p, pappl_pr_driver_data_t *d)
   snprintf(name, sizeof(name), "roll_min_%dx%dmm", 25, 25);
   add_media(p, d, name);
 
+  // media-type: stationery, then the media library's entries (a job's media-col media-type
+  // naming one prints with that media: app/ipp/bridge.py)
+  d->num_type = 0;
+  papplCopyString(p->type_names[p->bank][0], "stationery", sizeof(p->type_names[0][0]));
+  d->type[d->num_type ++] = p->type_names[p->bank][0];
+  for (i = 0; i < p->num_types && d->num_type < WP_MAX_TYPES && d->num_type < PAPPL_MAX_TYPE; i ++)
+  {
+    papplCopyString(p->type_names[p->bank][d->num_type], p->types[i], sizeof(p->type_names[0][0]));
+    d->type[d->num_type] = p->type_names[p->bank][d->num_type];
+    d->num_type ++;
+  }
+
   d->num_source = 1;
   d->source[0]  = "main-roll";
   memset(&d->media_ready[0], 0, sizeof(d->media_ready[0]));
@@ -1037,7 +1079,7 @@ fill_media(wp_printer_t *p, pappl_pr_driver_data_t *d)
   d->media_ready[0].size_length  = p->roll_len_mm * 100;
   d->media_ready[0].left_margin  = d->media_ready[0].right_margin = p->margin_hmm;
   papplCopyString(d->media_ready[0].source, "main-roll", sizeof(d->media_ready[0].source));
-  papplCopyString(d->media_ready[0].type, "stationery", sizeof(d->media_ready[0].type));
+  papplCopyString(d->media_ready[0].type, p->roll_type[0] ? p->roll_type : "stationery", sizeof(d->media_ready[0].type));
 
   // the default: the roll, as wide as the paper, as long as a print may be
   memset(&d->media_default, 0, sizeof(d->media_default));
@@ -1046,7 +1088,7 @@ fill_media(wp_printer_t *p, pappl_pr_driver_data_t *d)
   d->media_default.size_length = length * 100;
   d->media_default.left_margin = d->media_default.right_margin = p->margin_hmm;
   papplCopyString(d->media_default.source, "main-roll", sizeof(d->media_default.source));
-  papplCopyString(d->media_default.type, "stationery", sizeof(d->media_default.type));
+  papplCopyString(d->media_default.type, p->roll_type[0] ? p->roll_type : "stationery", sizeof(d->media_default.type));
 }
 
 
@@ -1105,9 +1147,6 @@ driver_cb(pappl_system_t *system, const char *driver_name, const char *device_ur
   d->bottom_top = 0;
 
   fill_media(p, d);
-
-  d->num_type = 1;
-  d->type[0]  = "stationery";
 
   // Identify-Printer: the message goes to the server's log (the operator's screen)
   d->identify_cb        = identify_cb;
