@@ -61,7 +61,7 @@ def rip_settings(settings: Any = None, profile: Profile | None = None, **kw: Any
     return from_mapping(merge(dict(settings or {}), flat), profile)
 
 
-def _media_job(settings: Any, profile: Profile, kw: dict) -> tuple[RipSettings, Profile]:
+def _media_job(settings: Any, profile: Profile, kw: dict[str, Any]) -> tuple[RipSettings, Profile]:
     """(RipSettings, profile) of a job whose settings may name a `media` (docs/media.md "A
     job's media"): the media's print mode under the settings given, its ICC and its ink
     limit, curves and drop budget, as `wideprint print --media` applies them."""
