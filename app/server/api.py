@@ -42,7 +42,7 @@ from .ports import ApiHost  # what it sees of the server (core.py composes it)
 from .previews import PREVIEW_PX, THUMB_PX
 from .spool import STATES, SpoolError
 from .validate import Invalid, _check_int, validate_job_request
-from . import web
+from . import routes, web
 
 log = logging.getLogger("wideprint.server")
 # every log line of the server's loggers: names shown escaped, tokens taken out (safe_text)
@@ -399,6 +399,8 @@ class ApiHandler(BaseHTTPRequestHandler):
         extra = {"WWW-Authenticate": 'Bearer realm="wideprint"'} if status == 401 else None
         if status == 503:
             extra = {"Retry-After": "1"}
+        if status == 405 and getattr(self, "_allow", None):
+            extra = {"Allow": ", ".join(self._allow)}
         self._json(status, {"error": message}, close=close, extra=extra)
 
     def send_error(self, code, message=None, explain=None) -> None:
@@ -531,6 +533,7 @@ class ApiHandler(BaseHTTPRequestHandler):
             raise Invalid(f"bad JSON: {exc}") from None
 
     def _dispatch(self, method: str) -> None:
+        self._allow: list[str] = []            # the methods a 405's Allow header names
         url = urlsplit(self.path)
         parts = [p for p in url.path.split("/") if p]
         if url.path in web.STATIC or url.path in web.SESSION_ROUTES:
@@ -559,6 +562,12 @@ class ApiHandler(BaseHTTPRequestHandler):
             self._body_left = self._length or 0
             if parts[:1] != ["v1"]:
                 raise Invalid(f"no such endpoint {url.path[:80]}", 404)
+            if routes.find(method, parts) is None:     # declared once: app/server/routes.py
+                self._allow = routes.methods(parts)
+                if self._allow:
+                    raise Invalid(f"{method} {url.path[:80]}: not allowed here (allowed: "
+                                  f"{', '.join(self._allow)})", 405)
+                raise Invalid(f"no such endpoint {method} {url.path[:80]}", 404)
             route = parts[1:]
             if method == "POST" and route == ["jobs"]:
                 self._query(url.query, ())
