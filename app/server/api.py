@@ -709,15 +709,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                 if method == "PATCH" and len(route) == 2:
                     self._may_act(job_id, "edit")
                     return self._json(200, self._job(self.srv.edit(job_id, body)))
-                if method == "GET" and len(route) == 3 and route[2] == "proof.png":
-                    job = self.srv.spool.get(job_id)
-                    if job is None:
-                        raise Invalid(f"no job {job_id}", 404)
-                    q = self._query(url.query, ("px",))
-                    px = _check_int("px", _number("px", q["px"]), *PREVIEW_PX) if "px" in q \
-                        else THUMB_PX
-                    return self._send(200, self.srv.previews.proof_png(job, px), "image/png")
-                if method == "GET" and len(route) == 3 and route[2] in ("preview", "preview.png"):
+                if method == "GET" and len(route) == 3 and route[2] in ("preview", "preview.png",
+                                                                         "proof.png"):
                     job = self.srv.spool.get(job_id)
                     if job is None:
                         raise Invalid(f"no job {job_id}", 404)
@@ -726,6 +719,8 @@ class ApiHandler(BaseHTTPRequestHandler):
                         else THUMB_PX
                     if route[2] == "preview.png":
                         return self._send(200, self.srv.previews.png(job, px), "image/png")
+                    if route[2] == "proof.png":          # the soft proof (docs/color.md)
+                        return self._send(200, self.srv.previews.proof_png(job, px), "image/png")
                     info = self.srv.previews.info(job, px)
                     # a quote at the price list, and whether it fits the paper loaded
                     info["quote"] = self.srv.quote(job, info)
