@@ -155,10 +155,17 @@ def test_rip_and_hold_prints_the_kept_planes_bit_exact(shop, tmp_path, caplog):
     # a job marked later, then edited: its planes are made again for the new settings
     later = c.submit(src, hold=True)["job"]
     c.request("POST", f"/v1/jobs/{later['id']}/rip-hold")
-    first = wait_for(lambda: c.job(later["id"]).get("ripped"), 60, what="ripped")
+    wait_for(lambda: (c.job(later["id"]).get("ripped") or {}).get("ready"), 60, what="ripped")
+
+    def later_file():        # named by the job and the key of what it was ripped with
+        return {p.name for p in (s.state_dir / "ripped").iterdir()
+                if p.name.startswith(f"{later['id']}-")}
+    first = later_file()
+    assert len(first) == 1
     c.edit(later["id"], settings={"passes": 4})
     wait_for(lambda: len(list((s.state_dir / "ripped").iterdir())) == 2 and
-             c.job(later["id"])["ripped"]["rip_s"] != first["rip_s"], 60, what="ripped again")
+             len(later_file()) == 1 and later_file() != first and
+             c.job(later["id"])["ripped"]["ready"], 60, what="ripped again")
     for job in (plain, ahead, later):
         c.action(job["id"], "release")
         assert c.wait(job["id"], 60)["state"] == "done"
