@@ -381,9 +381,6 @@ def test_a_job_too_wide_is_refused_naming_the_file_flagged_and_fitted_with_a_cli
     qtbot.waitUntil(lambda: shop_win.estimate.fit.text() == "", timeout=20_000)
 
 
-@pytest.mark.xfail(reason="CI of da29d61: the failed/done job never appears in the GUI's "
-                   "history within 90 s although the server ends it in 1 s; cause not found "
-                   "this session (issue 34 note)", strict=False)
 def test_a_failed_job_is_billed_only_what_it_printed(qtbot, shop_win, shop, tmp_path):
     """Forced onto paper too narrow, it fails at the printer with 0 strokes: the history's
     accounting says 0 area and no media cost, and names the file, not the spool copy."""
@@ -405,9 +402,6 @@ def test_a_failed_job_is_billed_only_what_it_printed(qtbot, shop_win, shop, tmp_
     assert shop_win.estimate.note.text().startswith("failed: too-wide.tif")
 
 
-@pytest.mark.xfail(reason="CI of da29d61: the failed/done job never appears in the GUI's "
-                   "history within 90 s although the server ends it in 1 s; cause not found "
-                   "this session (issue 34 note)", strict=False)
 def test_reprint_from_the_history_is_bit_exact_and_its_preview_has_true_rulers(
         qtbot, shop_win, shop, tmp_path):
     from wideprint.rip.planes import read_planes

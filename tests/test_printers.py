@@ -117,8 +117,9 @@ def test_serve_refuses_bad_printer_options(tmp_path):
 
 
 def test_live_state_is_pushed_as_server_sent_events(two):
-    """GET /v1/events: the printers' state and the unfinished jobs, sent when they change;
-    a client sees a job queued, printing on a printer, and gone when done, without polling."""
+    """GET /v1/events: the printers' state, the unfinished jobs and the mark of the ended
+    ones, sent when they change; a client sees a job queued, printing on a printer, and gone
+    when done (into the history), without polling."""
     import http.client
     import json
     import threading
@@ -146,7 +147,11 @@ def test_live_state_is_pushed_as_server_sent_events(two):
     assert client.wait(job_id, 60)["state"] == "done"
     t.join(30)
     kinds = [k for k, _ in events]
-    assert kinds[:2] == ["printers", "jobs"]                      # the state at once
+    assert kinds[:3] == ["printers", "jobs", "ended"]             # the state at once
+    ended = [v for k, v in events if k == "ended"]
+    # the job's end moves the mark of ended jobs (what a history follows; a job that comes
+    # and goes between two samples of `jobs` shows only here)
+    assert ended[-1]["count"] == ended[0]["count"] + 1 and ended[-1]["last_id"] == job_id
     printing = [p for k, v in events if k == "printers" for p in v
                 if p["name"] == "right" and p["current"] and p["current"]["id"] == job_id]
     assert printing, "no event showed the job printing on its printer"

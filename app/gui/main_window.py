@@ -228,6 +228,7 @@ class MainWindow(QMainWindow):
         self.printers: list[dict] = []
         self.active: list[dict] = []
         self.history: list[dict] = []
+        self._history_read = False                  # the history has been read once
         self._thumbs_asked: set = set()
         self._media_pending: set[str] = set()
         self._shown_key = None
@@ -249,6 +250,9 @@ class MainWindow(QMainWindow):
 
         link.printersChanged.connect(self._printers_changed)
         link.jobsChanged.connect(self._jobs_changed)
+        # a job can come and go between two samples of the queue: the history follows the
+        # server's mark of ended jobs too (docs/server.md "Live state")
+        link.endedChanged.connect(lambda _mark: self.refresh_history(log_new=True))
         link.connected.connect(self._connection_changed)
         link.requestFailed.connect(self._request_failed)
         self._save_timer = QTimer(self)
@@ -586,8 +590,17 @@ class MainWindow(QMainWindow):
         if self.tabs.currentIndex() == 0:
             self._selection_timer.start()
 
-    def refresh_history(self, log_ended=()) -> None:
+    def refresh_history(self, log_ended=(), log_new: bool = False) -> None:
+        """Read the history again; log the end of the jobs in `log_ended` (seen leaving the
+        queue) and, with `log_new`, of those new in it since the last read (jobs that ended
+        before the queue ever showed them)."""
         def got(jobs):
+            if log_new and self._history_read:
+                seen = {j["id"] for j in self.history}
+                to_log = ended | {j["id"] for j in jobs if j["id"] not in seen}
+            else:
+                to_log = ended
+            self._history_read = True
             self.history = jobs
             keep = self.history_view.selected_ids()
             self.history_model.set_jobs(jobs)
@@ -596,7 +609,7 @@ class MainWindow(QMainWindow):
             self._want_thumbs(jobs)
             self._forget_old(jobs)
             for j in jobs:
-                if j["id"] in log_ended and j["id"] not in self._ended_logged:
+                if j["id"] in to_log and j["id"] not in self._ended_logged:
                     self._ended_logged.add(j["id"])
                     msg = j.get("message") or ""
                     if j["state"] == "cancelled":
@@ -604,6 +617,7 @@ class MainWindow(QMainWindow):
                     else:
                         log.log(ENDED.get(j["state"], logging.INFO), "job %s %s %s%s", j["id"],
                                 safe(j["name"]), j["state"], f": {safe(short_paths(msg))}" if msg else "")
+        ended = set(log_ended)
         self.link.call(lambda c: c.request("GET", f"/v1/jobs?state=done,failed,cancelled&limit="
                                               f"{HISTORY_ROWS}&newest=1")["jobs"], got)
 

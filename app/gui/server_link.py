@@ -105,6 +105,7 @@ class _Call:
 class ServerLink(QObject):
     printersChanged = Signal(list)       # GET /v1/events "printers"
     jobsChanged = Signal(list)           # GET /v1/events "jobs" (queued, held, printing)
+    endedChanged = Signal(dict)          # GET /v1/events "ended" (a job ended: the history)
     connected = Signal(bool, str)        # the event stream is up / down (and why)
     requestFailed = Signal(str)
     _answer = Signal(object, object)     # callback, value: from pool threads to the UI thread
@@ -241,3 +242,5 @@ class ServerLink(QObject):
             self.printersChanged.emit(value)
         elif kind == "jobs":
             self.jobsChanged.emit(value)
+        elif kind == "ended":
+            self.endedChanged.emit(value)

@@ -289,6 +289,15 @@ class Spool:
             args.append(limit)
         return [_job_dict(r) for r in self.db.execute(q, args)]
 
+    def ended_mark(self) -> dict:
+        """What changes whenever a job ends (or an ended one is deleted): the number of ended
+        jobs and the newest end.  The event stream sends it as `ended`, so a front end's
+        history follows even a job that came and went between two samples of `jobs`."""
+        n, last, newest = self.db.execute(
+            f"SELECT COUNT(*), MAX(finished), MAX(id) FROM jobs WHERE state IN "
+            f"({','.join('?' * len(FINAL))})", FINAL).fetchone()
+        return {"count": n, "finished": last, "last_id": newest}
+
     def counts(self) -> dict:
         out = {s: 0 for s in STATES}
         for state, n in self.db.execute("SELECT state, COUNT(*) FROM jobs GROUP BY state"):
