@@ -27,22 +27,13 @@ from PySide6.QtCore import QMimeData, QPoint, QPointF, Qt, QUrl  # noqa: E402
 from PySide6.QtGui import QDragEnterEvent, QDropEvent  # noqa: E402
 from PySide6.QtWidgets import QApplication, QHeaderView, QLabel  # noqa: E402
 
-from support.gui import LONG, Server, image, job_named, names_in, open_window, select  # noqa: E402
+from support.gui import (LONG, Server, image, job_named, names_in, open_window,  # noqa: E402
+                         paused_server, select, window)
 from wideprint.rip.planes import read_planes  # noqa: E402
 
 
-@pytest.fixture
-def server(tmp_path):
-    s = Server(tmp_path, "--paused")
-    yield s
-    s.stop()
-
-
-@pytest.fixture
-def win(qtbot, server, tmp_path):
-    w = open_window(qtbot, server, tmp_path / "cfg")
-    yield w
-    w.link.stop()
+# the paused server and the window on it, as every GUI test file has them (tests/support/gui.py)
+server, win = paused_server, window
 
 
 def media_of(srv: Server, job_id: int) -> np.ndarray:

@@ -17,23 +17,14 @@ from PySide6.QtGui import QImage, QPainter, QWheelEvent  # noqa: E402
 from PySide6.QtWidgets import (QAbstractSlider, QAbstractSpinBox, QApplication, QComboBox,  # noqa: E402
                                QMessageBox, QStyleOptionViewItem)
 
-from support.gui import LONG, Server, image, job_named, names_in, open_window, select  # noqa: E402
+from support.gui import (LONG, Server, image, job_named, names_in, open_window,  # noqa: E402
+                         paused_server, select, window)
 from wideprint.app.gui.main_window import MainWindow  # noqa: E402
 from wideprint.app.gui.server_link import ServerLink, find_or_start  # noqa: E402
 
 
-@pytest.fixture
-def server(tmp_path):
-    s = Server(tmp_path, "--paused")
-    yield s
-    s.stop()
-
-
-@pytest.fixture
-def win(qtbot, server, tmp_path):
-    w = open_window(qtbot, server, tmp_path / "cfg")
-    yield w
-    w.link.stop()
+# the paused server and the window on it, as every GUI test file has them (tests/support/gui.py)
+server, win = paused_server, window
 
 
 def wheel(widget, steps: int = -1) -> None:

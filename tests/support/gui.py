@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from support.images import random_planes, write_cmyk_tiff
 from support.server import ServerProcess
 from wideprint.app.gui.main_window import MainWindow
@@ -39,6 +41,22 @@ def open_window(qtbot, srv: Server, cfg: Path) -> MainWindow:
     w.show()
     qtbot.waitUntil(lambda: bool(w.printers), timeout=20_000)
     return w
+
+
+@pytest.fixture
+def paused_server(tmp_path):
+    """A paused `wideprint serve` for the test (a test file names it: `server = paused_server`)."""
+    s = Server(tmp_path, "--paused")
+    yield s
+    s.stop()
+
+
+@pytest.fixture
+def window(qtbot, server, tmp_path):
+    """The main window on the test's `server` (`win = window`), stopped after the test."""
+    w = open_window(qtbot, server, tmp_path / "cfg")
+    yield w
+    w.link.stop()
 
 
 def image(tmp_path: Path, name: str, seed: int, rows: int = 300, cols: int = 400):
