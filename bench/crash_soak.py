@@ -92,7 +92,7 @@ class Soak:
 
     # -- the server ----------------------------------------------------------------------
     def start_server(self):
-        args = [PY, "-m", "wideprint.app.server_cli", "serve", "--state-dir", str(self.state),
+        args = [PY, "-m", "wideprint.app.cli", "serve", "--state-dir", str(self.state),
                 "--port", "0"]
         for name, spec in self.specs.items():
             args += ["--printer", f"{name}={spec}"]
@@ -111,12 +111,12 @@ class Soak:
         self.stats["kills"] += 1
 
     def client(self):
-        from wideprint.app.server_cli import Client
+        from wideprint.app.client import Client
         return Client(self.state)
 
     # -- clients, operator, killer ---------------------------------------------------------
     def submit_jobs(self, index: int):
-        from wideprint.app.server_cli import ApiError
+        from wideprint.app.client import ApiError
         sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
         from support.images import random_planes, write_cmyk_tiff
         rng = random.Random(self.seed * 1000 + index)
@@ -147,7 +147,7 @@ class Soak:
     def operator(self):
         """Releases jobs held because a printer could not confirm its sheet (in a shop: the
         operator looked at the sheet, cut it off)."""
-        from wideprint.app.server_cli import ApiError
+        from wideprint.app.client import ApiError
         while not self.stop.is_set():
             try:
                 c = self.client()
@@ -180,7 +180,7 @@ class Soak:
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> dict:
-        from wideprint.app.server_cli import ApiError
+        from wideprint.app.client import ApiError
         from wideprint.rip.planes import read_planes
         t0 = time.monotonic()
         self.start_server()

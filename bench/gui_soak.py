@@ -201,7 +201,7 @@ def make_images(folder: Path) -> list[Path]:
 
 
 def start_server(root: Path):
-    from wideprint.app.server_cli import Client
+    from wideprint.app.client import Client
     state = root / "state"
     log = open(root / "server.out", "ab")
     proc = subprocess.Popen(CLI + ["serve", "--state-dir", str(state), "--media-dir", str(root / "media"),
@@ -260,7 +260,7 @@ def _pyside_version() -> str:
 
 
 def run(minutes: float, replay_hz: float, out: Path | None, keep: Path | None = None) -> dict:
-    from wideprint.app.server_cli import Client
+    from wideprint.app.client import Client
     root = Path(keep or tempfile.mkdtemp(prefix="gui-soak-"))
     root.mkdir(parents=True, exist_ok=True)
     images = make_images(root)

@@ -208,7 +208,7 @@ class IppServe:
 
     def __init__(self, root: Path, printers: list[str], *args: str,
                  devices: dict[str, str] | None = None):
-        from wideprint.app.server_cli import Client
+        from wideprint.app.client import Client
         from wideprint.rip.profile import load_profile
         if not shutil.which("ipptool"):
             pytest.fail("ipptool is missing: apt-get install cups-ipp-utils (.ci/run does)")

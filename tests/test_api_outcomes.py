@@ -19,7 +19,8 @@ import pytest
 
 from support.images import random_planes, write_cmyk_tiff
 from support.server import wait_for
-from wideprint.app.server_cli import ApiError, Client, main
+from wideprint.app.cli import main
+from wideprint.app.client import ApiError, Client
 
 PY = sys.executable
 

@@ -21,7 +21,7 @@ import pytest
 
 from support.images import ROOT, random_planes, write_cmyk_tiff
 from support.server import raw_request
-from wideprint.app.server_cli import ApiError, Client
+from wideprint.app.client import ApiError, Client
 
 PY = sys.executable
 
@@ -57,7 +57,7 @@ def test_serve_with_an_empty_token_file_exits_with_the_file_named(tmp_path):
     state = tmp_path / "state"
     state.mkdir()
     (state / "token").write_bytes(b"")
-    r = subprocess.run([PY, "-m", "wideprint.app.server_cli", "serve", "--state-dir", str(state),
+    r = subprocess.run([PY, "-m", "wideprint.app.cli", "serve", "--state-dir", str(state),
                         "--port", "0"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stdout + r.stderr
     assert str(state / "token") in r.stderr and "Traceback" not in r.stderr, r.stderr
@@ -153,7 +153,7 @@ def test_a_binary_token_file_gives_a_client_error_naming_the_file(tmp_path):
 
 # -- users and roles ----------------------------------------------------------------------------
 def users_cli(srv, *args):
-    from wideprint.app.server_cli import main
+    from wideprint.app.cli import main
     return main(["users", *args, "--state-dir", str(srv.state_dir)])
 
 
@@ -264,7 +264,7 @@ def test_a_bad_user_header_is_refused(srv):
 
 def test_the_cli_says_who_it_is(srv, tif):
     import getpass
-    r = subprocess.run([PY, "-m", "wideprint.app.server_cli", "submit", str(tif), "--hold",
+    r = subprocess.run([PY, "-m", "wideprint.app.cli", "submit", str(tif), "--hold",
                         "--json", "--state-dir", str(srv.state_dir)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

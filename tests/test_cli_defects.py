@@ -21,7 +21,7 @@ def cli(*args, timeout=300):
 
 
 class _Terminal(io.StringIO):
-    """stderr as a 100-column terminal (app/server_cli.progress draws only on a tty; with no
+    """stderr as a 100-column terminal (app/cli/common.progress draws only on a tty; with no
     file number to ask, it takes 100 columns)."""
 
     def isatty(self):

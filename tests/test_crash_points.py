@@ -21,7 +21,7 @@ import pytest
 
 from support.images import random_planes, write_cmyk_tiff
 from support.server import readline, start_server, stop, wait_for
-from wideprint.app.server_cli import ApiError
+from wideprint.app.client import ApiError
 from wideprint.rip.pipeline import RipJob
 from wideprint.rip.planes import read_planes
 from wideprint.rip.profile import load_profile

@@ -13,7 +13,7 @@ import pytest
 from support.images import ROOT, random_planes, write_cmyk_tiff
 from private_cups import private_cupsd
 from support.cups import conversions_from
-from wideprint.app.server_cli import Client
+from wideprint.app.client import Client
 from wideprint.rip.planes import read_planes
 
 BACKEND = ROOT / "resources" / "cups" / "wideprint"

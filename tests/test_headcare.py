@@ -230,7 +230,7 @@ def test_the_server_does_head_care_between_jobs_and_caps_an_idle_printer(tmp_pat
     import time
 
     from wideprint.app.server import PrintServer, ServerConfig
-    from wideprint.app.server_cli import ApiError, Client
+    from wideprint.app.client import ApiError, Client
     src, planes = tint
     prof = profile_with(tmp_path, cap_after_s=1.0)
     srv = PrintServer(ServerConfig(device="emulator", state_dir=tmp_path / "state",

@@ -15,7 +15,7 @@ import pytest
 
 from support.images import random_planes, tiny_tiff, write_cmyk_tiff
 from support.server import inprocess_server, wait_for
-from wideprint.app.server_cli import Client
+from wideprint.app.client import Client
 from wideprint.rip.planes import read_planes
 
 SCAN = 0.1

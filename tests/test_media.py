@@ -12,7 +12,7 @@ import pytest
 
 from wideprint.app import argyll, mediacal, medialib
 from wideprint.app.cli import build_parser, main
-from wideprint.app.media_cli import job_settings
+from wideprint.app.cli.media import job_settings
 from wideprint.device_sim.faults import Faults
 from wideprint.rip.color import DEFAULT_OUTPUT_ICC, default_output_icc
 

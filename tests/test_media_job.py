@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from wideprint.app.server_cli import ApiError, Client
+from wideprint.app.client import ApiError, Client
 from wideprint.rip.planes import read_planes
 
 SHIPPED = Path(__file__).resolve().parent.parent / "resources" / "media" / "vinyl-300"

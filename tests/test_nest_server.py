@@ -10,7 +10,7 @@ import pytest
 
 from support.images import random_planes, write_cmyk_tiff
 import wideprint.rip.layout  # noqa: F401 - imported here, before the server's threads do
-from wideprint.app.server_cli import ApiError, Client
+from wideprint.app.client import ApiError, Client
 from wideprint.rip.pipeline import RipJob
 from wideprint.rip.planes import read_planes
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from support.images import random_planes, write_cmyk_tiff
-from wideprint.app.server_cli import ApiError, Client
+from wideprint.app.client import ApiError, Client
 from wideprint.rip.planes import read_planes
 
 

@@ -78,7 +78,7 @@ def server(tmp_path_factory):
     srv = PrintServer(ServerConfig(state_dir=tmp / "state", media_dir=tmp / "media", port=0,
                                    start_paused=True))
     srv.start()
-    from wideprint.app.server_cli import Client
+    from wideprint.app.client import Client
     client = Client(srv.state_dir)
     src = tmp / "a.tif"
     tifffile.imwrite(src, np.full((20, 30, 4), 60, np.uint8), photometric="separated")

@@ -24,7 +24,7 @@ import pytest
 from support.images import random_planes, tiny_tiff, write_cmyk_tiff
 from support.server import inprocess_server, raw_request, start_server, stop, wait_for
 from support.server import start_emulator as _start_emulator
-from wideprint.app.server_cli import ApiError, Client
+from wideprint.app.client import ApiError, Client
 from wideprint.rip.planes import read_planes
 
 PY = sys.executable
@@ -438,7 +438,7 @@ def test_accounting_csv_columns_and_values(srv, client, tmp_path):
         assert float(r["area_m2"]) == pytest.approx(area, rel=1e-5)
         assert float(r["duration_s"]) > 0 and r["ended"] >= r["started"]
     out = tmp_path / "report.csv"
-    r = subprocess.run([PY, "-m", "wideprint.app.server_cli", "report", "--state-dir",
+    r = subprocess.run([PY, "-m", "wideprint.app.cli", "report", "--state-dir",
                         str(srv.state_dir), "--csv", str(out)], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0, r.stderr
@@ -448,7 +448,7 @@ def test_accounting_csv_columns_and_values(srv, client, tmp_path):
 
 def test_cli_submit_queue_status(srv, tmp_path):
     src = write_cmyk_tiff(tmp_path / "cli.tif", random_planes(30, 40, seed=2))
-    base = [PY, "-m", "wideprint.app.server_cli"]
+    base = [PY, "-m", "wideprint.app.cli"]
     sd = ["--state-dir", str(srv.state_dir)]
     r = subprocess.run(base + ["submit", str(src), *sd, "--passes", "2", "--no-bidir",
                                "--json", "--wait", "60"], capture_output=True, text=True, timeout=90)
@@ -488,7 +488,7 @@ def test_cancel_a_printing_job_stops_it_and_the_queue_goes_on(srv, client, tmp_p
 # -- requeue -------------------------------------------------------------------------------------
 def cli(srv_or_state, *args, timeout=60):
     state = getattr(srv_or_state, "state_dir", srv_or_state)
-    return subprocess.run([PY, "-m", "wideprint.app.server_cli", *args, "--state-dir", str(state)],
+    return subprocess.run([PY, "-m", "wideprint.app.cli", *args, "--state-dir", str(state)],
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -856,7 +856,7 @@ def test_presets_reload_says_what_changed(tmp_path):
 
 
 def test_progress_bar():
-    from wideprint.app.server_cli import progress
+    from wideprint.app.cli.common import progress
     buf = io.StringIO()
     line = progress(3, 12, "c.tif", width=12, stream=buf)
     assert line.startswith("[###---------]  25.0%  3/12  c.tif")

@@ -5,7 +5,7 @@ emulated printer's event deque of 200,000 records, ~350 B each)."""
 import numpy as np
 import tifffile
 
-from wideprint.app.server_cli import Client
+from wideprint.app.client import Client
 from wideprint.app.server.worker import EMULATOR_EVENTS_KEPT
 
 

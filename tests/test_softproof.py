@@ -116,7 +116,7 @@ def test_proof_needs_a_preview_to_write(chart):
 
 def test_the_server_gives_a_jobs_soft_proof(chart, tmp_path):
     from wideprint.app.server import PrintServer, ServerConfig
-    from wideprint.app.server_cli import Client
+    from wideprint.app.client import Client
     srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", port=0, start_paused=True))
     srv.start()
     client = Client(srv.state_dir)

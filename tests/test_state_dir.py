@@ -21,7 +21,7 @@ PY = sys.executable
 
 
 def serve(state, *extra, timeout=60):
-    return subprocess.run([PY, "-m", "wideprint.app.server_cli", "serve", "--device", "emulator",
+    return subprocess.run([PY, "-m", "wideprint.app.cli", "serve", "--device", "emulator",
                            "--state-dir", str(state), "--port", "0", *extra],
                           capture_output=True, text=True, timeout=timeout)
 
@@ -65,12 +65,12 @@ def test_a_lost_database_is_refused_and_the_spool_kept(queued, damage):
 def test_check_reports_and_repair_rebuilds_the_queue_held(queued, tmp_path):
     state, ids, planes, files = queued
     (state / "wideprint.db").write_bytes(b"")
-    r = subprocess.run([PY, "-m", "wideprint.app.server_cli", "serve", "--check", "--json",
+    r = subprocess.run([PY, "-m", "wideprint.app.cli", "serve", "--check", "--json",
                         "--state-dir", str(state)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 1, r
     rep = json.loads(r.stdout)
     assert "empty" in rep["database"] and len(rep["orphans"]) == 2 and not rep["ok"]
-    r = subprocess.run([PY, "-m", "wideprint.app.server_cli", "serve", "--check", "--repair",
+    r = subprocess.run([PY, "-m", "wideprint.app.cli", "serve", "--check", "--repair",
                         "--state-dir", str(state)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "rebuilt: 2 job(s)" in r.stdout

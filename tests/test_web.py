@@ -232,7 +232,7 @@ def click(driver, css: str, timeout: float = 10) -> None:
 def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(shop, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
-    from wideprint.app.server_cli import Client
+    from wideprint.app.client import Client
     url = f"http://127.0.0.1:{shop.port}/"
     client = Client(shop.state_dir, url=url.rstrip("/"))
     # the operator's shop: a price list, a 50 m roll on the left printer (docs/server.md)

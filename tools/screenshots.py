@@ -155,7 +155,7 @@ def run(out: Path) -> int:
             time.sleep(0.02)
 
     try:
-        from wideprint.app.server_cli import ApiError, Client
+        from wideprint.app.client import ApiError, Client
         t = time.monotonic() + 60
         while True:                          # our server up, before the GUI looks for one
             try:

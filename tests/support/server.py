@@ -25,10 +25,10 @@ import sys
 import time
 from pathlib import Path
 
-from wideprint.app.server_cli import Client
+from wideprint.app.client import Client
 
 PY = sys.executable
-SERVE = [PY, "-m", "wideprint.app.server_cli", "serve"]
+SERVE = [PY, "-m", "wideprint.app.cli", "serve"]
 CLI = [PY, "-m", "wideprint.app.cli"]
 EMULATOR = CLI + ["emulator"]
 READY = "wideprint serve: http://127.0.0.1:"

@@ -9,44 +9,25 @@ import sys
 import time
 from pathlib import Path
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _say, _where, family, measure_options
 
 
 def job_settings(args, profile):
     """(profile, RipSettings) of a job from the command line: with --media (a setting of
     the schema, rip/settings.py), the media applied by `medialib.resolve`."""
-    from ..rip.settings import from_mapping, mapping_from_args
-    from .medialib import resolve
+    from ...rip.settings import from_mapping, mapping_from_args
+    from ..medialib import resolve
     profile, mapping = resolve(mapping_from_args(args), profile)
     return profile, from_mapping(mapping, profile)
 
 
-def _say(args):
-    stream = sys.stderr if getattr(args, "json", False) else sys.stdout
-
-    def progress(msg: str) -> None:
-        print(msg, file=stream, flush=True)
-    return progress
-
-
-def _where(args) -> dict:
-    """Where charts print and who measures them: the emulator's spectrophotometer, or
-    (--measure-dir) an outside instrument whose .ti3 files are waited for."""
-    where = {"device": args.device, "progress": _say(args)}
-    if args.measure_dir:
-        where.update(measure_dir=Path(args.measure_dir), wait_s=args.wait)
-    if getattr(args, "scanner_icc", None):
-        where["scanner_icc"] = Path(args.scanner_icc)
-    return where
-
-
 def _profile(args):
-    from ..rip.profile import load_profile
+    from ...rip.profile import load_profile
     return load_profile(getattr(args, "profile", None))
 
 
 def cmd_list(args) -> int:
-    from .medialib import DEFAULT_MEDIA, list_media
+    from ..medialib import DEFAULT_MEDIA, list_media
     rows = list_media()
     if args.json:
         print(json.dumps([{"name": m.name, "version": m.version, "shipped": m.shipped,
@@ -64,7 +45,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from .medialib import find, to_toml
+    from ..medialib import find, to_toml
     m = find(args.name)
     if args.json:
         print(json.dumps({**m.values, "folder": str(m.folder), "shipped": m.shipped}, indent=2))
@@ -75,8 +56,8 @@ def cmd_show(args) -> int:
 
 
 def cmd_create(args) -> int:
-    from . import mediacal
-    from .medialib import Media, check_name, check_values, now, save, user_dir
+    from .. import mediacal
+    from ..medialib import Media, check_name, check_values, now, save, user_dir
     name = check_name(args.name)
     dest = Path(args.dir) / name if args.dir else user_dir() / name
     if (dest / "media.toml").exists() and not args.replace:
@@ -94,7 +75,7 @@ def cmd_create(args) -> int:
         f"on {args.device} ({instrument})")
     scanner_s = None
     if args.scan and not args.scanner_icc:      # characterise the scanner first
-        from .argyll import tool
+        from ..argyll import tool
         tool("colprof")
         t0 = time.monotonic()
         args.scanner_icc = str(mediacal.scanner_profile(profile, dest, progress=say))
@@ -131,8 +112,8 @@ def report_text(r: dict) -> str:
 
 
 def cmd_verify(args) -> int:
-    from . import mediacal
-    from .medialib import find
+    from .. import mediacal
+    from ..medialib import find
     m = find(args.name)
     kept: dict = {}
     r = mediacal.verify(m, _profile(args), count=args.patches, seed=args.seed,
@@ -148,8 +129,8 @@ def cmd_verify(args) -> int:
 
 
 def cmd_recalibrate(args) -> int:
-    from . import mediacal
-    from .medialib import Media, check_values, find, now, save, user_dir
+    from .. import mediacal
+    from ..medialib import Media, check_values, find, now, save, user_dir
     m = find(args.name)
     if m.shipped:              # a shipped entry is recalibrated into the user's library
         import shutil
@@ -172,26 +153,26 @@ def cmd_recalibrate(args) -> int:
 
 
 def cmd_remove(args) -> int:
-    from .medialib import remove
+    from ..medialib import remove
     print(f"removed {remove(args.name)}")
     return EXIT_OK
 
 
 def cmd_export(args) -> int:
-    from .medialib import export
+    from ..medialib import export
     print(export(args.name, Path(args.output)))
     return EXIT_OK
 
 
 def cmd_import(args) -> int:
-    from .medialib import import_
+    from ..medialib import import_
     m = import_(Path(args.archive), args.name, args.replace)
     print(f"media {m.name} v{m.version} imported to {m.folder}")
     return EXIT_OK
 
 
 def cmd_media(args) -> int:
-    from .argyll import ArgyllError
+    from ..argyll import ArgyllError
     t0 = time.monotonic()
     try:
         return args.media_func(args)
@@ -206,28 +187,11 @@ def cmd_media(args) -> int:
             print(f"{time.monotonic() - t0:.1f} s", file=sys.stderr)
 
 
-def _device_options(q) -> None:
-    q.add_argument("--device", default="emulator", help="where the charts print (default: "
-                   "the in-process emulator, measured by its spectrophotometer)")
-    q.add_argument("--measure-dir", metavar="DIR", help="measure outside wideprint: each "
-                   "chart's picture and patches go to DIR/NAME.tif and NAME.ti1, and its "
-                   "measurement DIR/NAME.ti3 (chartread's CGATS) is waited for")
-    q.add_argument("--wait", type=float, default=86400.0, metavar="S",
-                   help="how long to wait for a measurement file (default a day)")
-    q.add_argument("--scanner-icc", metavar="ICC", help="measure the charts with the "
-                   "emulated scanner through this input profile (media create --scan makes one)")
-
-
 def add_parser(sub) -> None:
-    p = sub.add_parser("media", help="media entries: ICC profile, ink limits, linearisation "
-                       "(docs/media.md)")
-    p.add_argument("--time", dest="verbose_time", action="store_true", help=argparse.SUPPRESS)
-    ms = p.add_subparsers(dest="media_command", required=True)
-
-    def cmd(name, func, help_):
-        q = ms.add_parser(name, help=help_)
-        q.set_defaults(func=cmd_media, media_func=func)
-        return q
+    def timing(p) -> None:
+        p.add_argument("--time", dest="verbose_time", action="store_true", help=argparse.SUPPRESS)
+    _, cmd = family(sub, "media", "media entries: ICC profile, ink limits, linearisation "
+                    "(docs/media.md)", "media_command", cmd_media, "media_func", timing)
 
     q = cmd("list", cmd_list, "the media in the library")
     q.add_argument("--json", action="store_true")
@@ -257,10 +221,7 @@ def add_parser(sub) -> None:
     q.add_argument("--description")
     q.add_argument("--dir", help="write the entry under this folder instead of the library")
     q.add_argument("--replace", action="store_true")
-    q.add_argument("--profile", metavar="TOML")
-    q.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
-    q.add_argument("--json", action="store_true")
-    _device_options(q)
+    measure_options(q)
 
     for name, func, help_ in (("verify", cmd_verify, "print and measure a control chart: "
                                "ΔE2000 against the entry's tolerances (exit 1: fail)"),
@@ -268,11 +229,7 @@ def add_parser(sub) -> None:
                                "print; the profile is kept")):
         q = cmd(name, func, help_)
         q.add_argument("name")
-        q.add_argument("--profile", metavar="TOML")
-        q.add_argument("--inject", action="append", metavar="KIND=VALUE",
-                       help="emulator fault, e.g. dot-gain=+8%%")
-        q.add_argument("--json", action="store_true")
-        _device_options(q)
+        measure_options(q, "emulator fault, e.g. dot-gain=+8%%")
         if name == "verify":
             q.add_argument("--dpi", type=int, help="verify in this mode of the entry")
             q.add_argument("--picture", metavar="PNG", help="the report as a picture: each "

@@ -25,7 +25,7 @@ ROLL_ACTIONS = ("show", "load", "set", "unload")
 
 
 def add_parser(sub) -> None:
-    from . import devices
+    from .. import devices
     p = sub.add_parser("printer", help="printer status and machine commands (home, park, "
                        "feed, measure the paper, clear a fault, spit, purge, cap)",
                        description="Status and machine commands of one printer, through the "
@@ -72,7 +72,7 @@ def _show_roll(r: dict) -> None:
 
 def cmd_roll(args) -> int:
     """`wideprint printer roll ...`: the print server's roll on one printer."""
-    from .client import ApiError, Client
+    from ..client import ApiError, Client
     what = args.mm or "show"
     if what not in ROLL_ACTIONS:
         print(f"wideprint printer roll: {what!r}: one of {', '.join(ROLL_ACTIONS)}", file=sys.stderr)
@@ -104,7 +104,7 @@ def cmd_roll(args) -> int:
 
 def status_dict(printer) -> dict:
     """Everything the status command shows, as JSON-able values."""
-    from ..driver import protocol as P
+    from ...driver import protocol as P
     st = printer.status()
     info = printer.identity or {}
     flags = {name: bool(st.flags & bit) for name, bit in (
@@ -176,7 +176,7 @@ def _again(printer, step, tries: int = 3):
     """Run a machine command; when the link fails (3 tries of a frame, e.g. a slow or noisy
     line) reconnect and run it again.  Every command here is safe to repeat: home, park,
     measure and enable are idempotent, a feed goes to an absolute position."""
-    from ..driver.link import LineTooNoisy, LinkError
+    from ...driver.link import LineTooNoisy, LinkError
     for attempt in range(tries):
         try:
             return step()
@@ -192,12 +192,12 @@ def _again(printer, step, tries: int = 3):
 
 
 def cmd_printer(args) -> int:
-    from ..driver import protocol as P
-    from ..driver.link import DeviceError, LinkError
-    from ..driver.printer import Printer, PrinterFault
-    from ..rip.profile import load_profile
-    from ..driver.headcare import HeadCare
-    from .devices import close_device, is_emulator_spec, open_device
+    from ...driver import protocol as P
+    from ...driver.link import DeviceError, LinkError
+    from ...driver.printer import Printer, PrinterFault
+    from ...rip.profile import load_profile
+    from ...driver.headcare import HeadCare
+    from ..devices import close_device, is_emulator_spec, open_device
     if args.action == "roll":
         return cmd_roll(args)
     if (args.action == "feed") != (args.mm is not None):
@@ -217,7 +217,7 @@ def cmd_printer(args) -> int:
             if not is_emulator_spec(args.device):
                 raise ValueError(f"--inject needs an emulated device (--device emulator, "
                                  f"emulator-usb or emulator-pci), not {args.device}")
-            from ..device_sim.faults import Faults
+            from ...device_sim.faults import Faults
             faults = Faults.parse(args.inject)
     except ValueError as exc:
         print(f"wideprint printer: {exc}", file=sys.stderr)

@@ -6,16 +6,16 @@ from __future__ import annotations
 
 # the scans `calibrate KIND` measures: the test print each is a scan of (the registry of
 # test patterns, rip/testpatterns.py; this name kept for its users)
-from ..rip.testpatterns import CALIBRATION_KINDS as KINDS
+from ...rip.testpatterns import CALIBRATION_KINDS as KINDS
 
 
 def cmd_calibrate(args) -> int:
-    from .calibrate import cmd_calibrate as measure
+    from ..calibrate import cmd_calibrate as measure
     return measure(args)
 
 
 def add_parser(sub) -> None:
-    from ..rip.settings import setting
+    from ...rip.settings import setting
     p = sub.add_parser("calibrate", help="measure a scanned calibration print and store the "
                        "result in the printer profile (docs/calibration.md)",
                        description="Finds the test pattern in a scan (any placement, a few "
@@ -44,4 +44,3 @@ def add_parser(sub) -> None:
     p.add_argument("--write", action="store_true", help="store the result in --profile")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_calibrate)
-

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _say, _where, family, measure_options
+
 #: the swatch book's grid, in --step units (docs/spot.md "The swatch book")
 L_STEPS = (-2, -1, 0, 1, 2)
 C_STEPS = (-1, 0, 1)
@@ -18,12 +19,12 @@ H_STEPS = (-1, 0, 1)
 
 
 def _book():
-    from ..rip.spot import SpotBook
+    from ...rip.spot import SpotBook
     return SpotBook()
 
 
 def _media(args):
-    from .medialib import DEFAULT_MEDIA, find
+    from ..medialib import DEFAULT_MEDIA, find
     m = find(getattr(args, "media", None) or DEFAULT_MEDIA)
     if not m.icc_path.is_file():
         raise ValueError(f"media {m.name!r}: its profile {m.icc_path} is missing")
@@ -73,7 +74,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from ..rip.spot import read_file
+    from ...rip.spot import read_file
     warnings: list[str] = []
     spots = read_file(args.file, warnings)
     for w in warnings:
@@ -85,7 +86,7 @@ def cmd_import(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from ..rip.spot import write_cxf3, write_text
+    from ...rip.spot import write_cxf3, write_text
     lib = _book().library(args.library)
     out = Path(args.output)
     if out.suffix.lower() in (".cxf", ".xml"):
@@ -137,7 +138,7 @@ def variations(lab, step: float) -> tuple[np.ndarray, list[tuple[int, int, int]]
 def swatch_recipes(lab, icc: str, step: float, recipe=None) -> tuple[np.ndarray, list]:
     """Ink fractions (n, 4) of the book: through the profile around the Lab, or around a
     saved recipe (the recipe plus the profile's change for the same move in Lab)."""
-    from ..rip.spot import cmyk_to_lab, lab_to_cmyk
+    from ...rip.spot import cmyk_to_lab, lab_to_cmyk
     if recipe is None:
         aims, grid = variations(lab, step)
         return np.clip(lab_to_cmyk(aims, icc), 0, 1), grid
@@ -148,11 +149,10 @@ def swatch_recipes(lab, icc: str, step: float, recipe=None) -> tuple[np.ndarray,
 
 
 def cmd_swatch(args) -> int:
-    from ..rip.profile import load_profile
-    from ..rip.spot import delta_e2000, now
-    from . import mediacal
-    from .media_cli import _say, _where
-    from .medialib import apply_to_profile
+    from ...rip.profile import load_profile
+    from ...rip.spot import delta_e2000, now
+    from .. import mediacal
+    from ..medialib import apply_to_profile
     book = _book()
     spot = _spot(book, args.name)
     media = _media(args)
@@ -240,7 +240,7 @@ def summary(spots: list[dict]) -> str:
 
 
 def cmd_spot(args) -> int:
-    from .argyll import ArgyllError
+    from ..argyll import ArgyllError
     try:
         return args.spot_func(args)
     except (ValueError, KeyError, OSError) as exc:
@@ -253,15 +253,8 @@ def cmd_spot(args) -> int:
 
 
 def add_parser(sub) -> None:
-    from .media_cli import _device_options
-    p = sub.add_parser("spot", help="spot colours: named colour libraries, recipes per media, "
-                       "the swatch book (docs/spot.md)")
-    ss = p.add_subparsers(dest="spot_command", required=True)
-
-    def cmd(name, func, help_):
-        q = ss.add_parser(name, help=help_)
-        q.set_defaults(func=cmd_spot, spot_func=func)
-        return q
+    _, cmd = family(sub, "spot", "spot colours: named colour libraries, recipes per media, "
+                    "the swatch book (docs/spot.md)", "spot_command", cmd_spot, "spot_func")
 
     q = cmd("list", cmd_list, "the libraries and their colours")
     q.add_argument("--json", action="store_true")
@@ -287,10 +280,7 @@ def add_parser(sub) -> None:
     q.add_argument("name")
     q.add_argument("--media", metavar="M")
     q.add_argument("--step", type=float, default=2.0, metavar="DE", help="step in ΔE units (default 2)")
-    q.add_argument("--profile", metavar="TOML")
-    q.add_argument("--inject", action="append", metavar="KIND=VALUE", help="emulator fault")
-    q.add_argument("--json", action="store_true")
-    _device_options(q)
+    measure_options(q)
     q = cmd("pick", cmd_pick, "store the swatch book's best patch (or --patch N) as the recipe")
     q.add_argument("name")
     q.add_argument("--media", metavar="M")

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 
 def cmd_quality(args) -> int:
-    from .quality import cmd_quality as measure
+    from ..quality import cmd_quality as measure
     return measure(args)
 
 
 def add_parser(sub) -> None:
-    from ..rip.settings import setting
+    from ...rip.settings import setting
     p = sub.add_parser("quality", help="banding, graininess and mottle of the flat tints on a "
                        "scan (docs/quality.md)",
                        description="Finds the flat tints of a scan (strips of ink along the "

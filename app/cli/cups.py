@@ -134,4 +134,3 @@ def add_parser(sub) -> None:
                    help="tell this cupsd to reload (SIGHUP) instead of `systemctl restart cups`")
     p.add_argument("--no-reload", action="store_true", help="only write the file")
     p.set_defaults(func=cmd_cups)
-
