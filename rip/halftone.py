@@ -20,7 +20,9 @@ weight x 1.15 for the 300 x 370.5 grid, a blue-noise modulation from
 diffuses every ink on its own; ``vector`` decides C and M jointly (at most one
 of the two dots where C + M <= 100 %, at least one beyond; the pair's dots form
 one blue-noise pattern; which ink a single dot goes to is modulated too), Y and
-K on their own.  Serpentine on the absolute row,
+K on their own.  ``joint`` (rip/joint.py) decides C, M and Y together: a cell gets the floor
+or the ceiling of their local sum of coverages in dots (no cell stacked that the coverage
+does not force), K as ``vced``.  Serpentine on the absolute row,
 integer arithmetic, the error rows kept between bands as for ``fs``: identical
 bits for any band split.  Ink 0 never gets a drop, ink 255 always one.
 
@@ -127,8 +129,9 @@ from .settings import METHODS, ORDERED  # noqa: E402 - declared with the setting
 ERROR_DIFFUSION = tuple(m for m in METHODS if m not in ORDERED)
 
 #: error diffusion with variable coefficients (rip/diffusion.py): independent channels, and
-#: colour-aware pairs (C with M, Y with K); ``dbs`` refines vced's dots (rip/dbs.py)
-VARIABLE = ("vced", "vector", "dbs")
+#: colour-aware pairs (C with M, Y with K); ``dbs`` refines vced's dots (rip/dbs.py); ``joint``
+#: decides C, M and Y together (rip/joint.py)
+VARIABLE = ("vced", "vector", "dbs", "joint")
 
 # 5-wide, 3-row diffusion kernels, scan direction left to right, "*" is the
 # current pixel:             [*, x+1, x+2], row+1: [x-2..x+2], row+2: [x-2..x+2]
@@ -476,6 +479,10 @@ class Halftoner:
             self._err = np.zeros((channels, 2, width + 2 * _PAD), dtype=np.int32)
         elif method in _KERNELS_5X3:
             self._err = np.zeros((channels, 3, width + 2 * _PAD), dtype=np.int32)
+        elif method == "joint":
+            from .joint import JointDiffuser
+            self._vc = JointDiffuser(width, channels, modulation_noise())
+            self._err = self._vc.err
         elif method in VARIABLE:
             from .diffusion import VCDiffuser
             self._vc = VCDiffuser(width, channels, modulation_noise(), joint=method == "vector")

@@ -1,0 +1,221 @@
+"""``joint``: variable-coefficient error diffusion with C, M and Y decided jointly - dot-off-dot
+over three inks (docs/rip.md "The halftones", docs/media.md "Every dpi mode the same colour").
+
+Why: at 150 dpi a cell (one column, one row) takes at most one drop per ink and the columns
+are 169 µm apart, wider than a drop (~100 µm), so two drops in one cell cover the paper of
+one.  With each ink diffused on its own (``vced``) 91 % of a 71 % C+M+Y tint's drops share a
+cell with another ink, where at most 53 % must (Σ coverage 2.13 of a cell: every cell
+taken, then only what is left stacks); the print comes out lighter than 300 dpi's at the
+same ink, so its profile asks for more ink (bench/ink150_floor.py).  ``vector`` keeps only C
+and M apart.
+
+The decision, per pixel (``vced``'s arithmetic otherwise: ``rip/diffusion.py``):
+
+* **How many dots** the cell gets is one error diffusion of the three inks' sum.  With ``L =
+  c + m + y`` (0..765) the cell gets ``base = ceil(L / 255) - 1`` dots for certain (0 up to
+  full coverage, 1 up to twice, 2 beyond) and one more when the three values' sum (ink +
+  error each) minus ``base`` full dots reaches the threshold, modulated for the combined
+  level ``L - 255 base`` as ``vced`` modulates a level.  So a cell holds ``floor`` or
+  ``ceil`` of the local Σ coverage: no cell is left empty while another holds two, no cell
+  holds three while another holds one - stacking only what the coverage forces.
+* **Which inks**: those furthest above their own (modulated) thresholds, each with a split
+  noise of its own (the mask a quarter tile along, ``SPLIT_BOOST`` x the ink's modulation,
+  as ``vector``'s split), so the inks' dots interleave without line or checkerboard domains.
+  An ink at 0 never gets a drop, at 255 always one (the count gives way: at least the inks
+  at 255, at most the inks above 0).
+* **Tone**: each ink keeps its own error, diffused with the combined level's weights
+  (where the combined pattern is neither almost empty nor almost full, 16..239; else the
+  ink's own level's), so each ink's mean coverage is its input; the error is clamped at
+  ``PAIR_LIMIT`` (254 levels), as ``vector``'s pair.
+* **K on its own**, diffused exactly as ``vced`` diffuses it (the same bits, on a second
+  thread): K is the most visible ink, so it keeps its own best pattern, and in a separation
+  K mixes with C, M and Y only in the shadows, where the cell is full anyway.
+  (Measured with K in the count instead: bench/ink150_floor.py.)
+
+Serpentine on the absolute row, integer arithmetic, the error rows carried between bands
+(``err``, as ``vced``): the same dots for any band split, any thread split, every run.
+Fewer than three channels: each on its own, as ``vced``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .compiled import kernel
+from .diffusion import (NEXT_BOOST, PAIR_LIMIT, SPLIT_BOOST, UNIT, WEIGHT_BITS, coefficient_table,
+                        modulation_table, noise_offsets, strength_table, vc_planes, weight_tables)
+from .serpentine import _end_row, _serpentine
+
+__all__ = ["JointDiffuser", "cmy_rows", "JOINT"]
+
+#: the inks decided together (C, M, Y); the others (K) each on its own
+JOINT = 3
+
+_U = UNIT
+_T0 = 128 * UNIT
+_FULL = 255 * UNIT
+_SH = WEIGHT_BITS
+_BIG = 1 << 40          # an ink at 255 ranks before, an ink at 0 after, every other
+
+
+@kernel(inline="always")
+def _rank(lvl, v, t, split):
+    """An ink's claim to a dot: how far its value is above its own threshold (modulated by
+    the split noise); 255 always first, 0 always last."""
+    if lvl == 255:
+        return _BIG
+    if lvl == 0:
+        return -_BIG
+    return v - t + split
+
+
+@kernel()
+def cmy_rows(src, dst, err, row0, wn, wdl, mod, smod, noise, offs, lim):  # pragma: no cover
+    """Channels 0, 1, 2 of (rows, width, channels) C-contiguous uint8 src/dst decided
+    jointly (the module docstring); err (channels, 2, width + 4) int32 error rows by
+    absolute row & 1; row0 the absolute row of src[0]; wn, wdl, mod, smod (256,) int64; noise
+    (n, n) uint8; offs (channels, 2) int64 noise offsets; lim the error clamp."""
+    rows, width = src.shape[0], src.shape[1]
+    ch = np.uint64(src.shape[2])
+    nm = np.uint64(noise.shape[0] - 1)
+    m = noise.shape[0] - 1
+    q4 = noise.shape[0] // 4
+    u1, u2 = np.uint64(1), np.uint64(2)
+    x0, x1, x2 = np.uint64(offs[0, 0]), np.uint64(offs[1, 0]), np.uint64(offs[2, 0])
+    s0, s1, s2 = np.uint64(offs[0, 0] + q4), np.uint64(offs[1, 0] + q4), np.uint64(offs[2, 0] + q4)
+    for i in range(rows):
+        r = row0 + i
+        srow = src[i].reshape(-1)
+        drow = dst[i].reshape(-1)
+        a, b = r & 1, (r + 1) & 1
+        c0, n0, c1, n1, c2, n2 = err[0, a], err[0, b], err[1, a], err[1, b], err[2, a], err[2, b]
+        z0 = noise[(r + offs[0, 1]) & m]
+        z1 = noise[(r + offs[1, 1]) & m]
+        z2 = noise[(r + offs[2, 1]) & m]
+        k0 = k1 = k2 = 0        # the next pixel's shares
+        p0 = p1 = p2 = 0        # the row below: the cell under this pixel, so far
+        fwd = (r & 1) == 0
+        for k in range(width):
+            x, p, q = _serpentine(k, width, fwd)
+            o = x * ch
+            l0 = np.int64(srow[o])
+            l1 = np.int64(srow[o + u1])
+            l2 = np.int64(srow[o + u2])
+            v0 = l0 * _U + min(max(c0[p] + k0, -lim), lim)
+            v1 = l1 * _U + min(max(c1[p] + k1, -lim), lim)
+            v2 = l2 * _U + min(max(c2[p] + k2, -lim), lim)
+            # how many dots: the sum's own diffusion at the combined level
+            tot = l0 + l1 + l2
+            base = 0
+            if tot > 510:
+                base = 2
+            elif tot > 255:
+                base = 1
+            lev = tot - 255 * base
+            t = _T0 + mod[lev] * (np.int64(z0[(x + x1) & nm]) - 128)
+            n = base + (1 if v0 + v1 + v2 - base * _FULL >= t else 0)
+            # which: the inks furthest above their own thresholds
+            r0 = _rank(l0, v0, _T0 + mod[l0] * (np.int64(z0[(x + x0) & nm]) - 128),
+                       smod[l0] * (np.int64(z0[(x + s0) & nm]) - 128))
+            r1 = _rank(l1, v1, _T0 + mod[l1] * (np.int64(z1[(x + x1) & nm]) - 128),
+                       smod[l1] * (np.int64(z1[(x + s1) & nm]) - 128))
+            r2 = _rank(l2, v2, _T0 + mod[l2] * (np.int64(z2[(x + x2) & nm]) - 128),
+                       smod[l2] * (np.int64(z2[(x + s2) & nm]) - 128))
+            full = (1 if l0 == 255 else 0) + (1 if l1 == 255 else 0) + (1 if l2 == 255 else 0)
+            some = (1 if l0 > 0 else 0) + (1 if l1 > 0 else 0) + (1 if l2 > 0 else 0)
+            n = min(max(n, full), some)
+            o0 = o1 = o2 = 0
+            if n == 3:
+                o0 = o1 = o2 = 1
+            elif n == 2:        # all but the last
+                o0 = o1 = o2 = 1
+                if r0 < r1 and r0 < r2:
+                    o0 = 0
+                elif r1 < r2:
+                    o1 = 0
+                else:
+                    o2 = 0
+            elif n == 1:        # the first
+                if r0 >= r1 and r0 >= r2:
+                    o0 = 1
+                elif r1 >= r2:
+                    o1 = 1
+                else:
+                    o2 = 1
+            drow[o] = o0
+            drow[o + u1] = o1
+            drow[o + u2] = o2
+            v0 -= o0 * _FULL
+            v1 -= o1 * _FULL
+            v2 -= o2 * _FULL
+            # the error with the combined pattern's weights (each ink's own near the extremes)
+            mid = 16 <= lev <= 239
+            w0 = lev if mid else l0
+            w1 = lev if mid else l1
+            w2 = lev if mid else l2
+            e0 = (v0 * wn[w0]) >> _SH
+            d0 = (v0 * wdl[w0]) >> _SH
+            e1 = (v1 * wn[w1]) >> _SH
+            d1 = (v1 * wdl[w1]) >> _SH
+            e2 = (v2 * wn[w2]) >> _SH
+            d2 = (v2 * wdl[w2]) >> _SH
+            k0, k1, k2 = e0, e1, e2
+            n0[q] = p0 + d0
+            n1[q] = p1 + d1
+            n2[q] = p2 + d2
+            p0, p1, p2 = v0 - e0 - d0, v1 - e1 - d1, v2 - e2 - d2
+        _end_row(c0, n0, p0, width, fwd)
+        _end_row(c1, n1, p1, width, fwd)
+        _end_row(c2, n2, p2, width, fwd)
+
+
+class JointDiffuser:
+    """Band-by-band ``joint`` diffusion of (rows, width, channels) uint8 ink: channels 0-2 (C,
+    M, Y) decided together by ``cmy_rows``, the rest (K) each on its own with ``vced``'s
+    arithmetic (``vc_planes``: the same bits as ``vced``'s K).  The interface of
+    ``rip.diffusion.VCDiffuser`` (``jobs``, ``process``, ``err``, ``row``), which
+    rip/halftone.py drives; state carries across bands."""
+
+    def __init__(self, width: int, channels: int, noise: np.ndarray):
+        n = noise.shape[0]
+        if noise.ndim != 2 or noise.shape[1] != n or n & (n - 1) or noise.dtype != np.uint8:
+            raise ValueError("noise must be a square uint8 tile whose side is a power of two")
+        self.width, self.channels = int(width), int(channels)
+        self.noise = np.ascontiguousarray(noise)
+        self.offsets = noise_offsets(n, self.channels)
+        self.wn, self.wdl = weight_tables(coefficient_table("zhoufang", NEXT_BOOST))
+        self.mod = modulation_table(strength_table("tuned"))
+        self.smod = np.rint(self.mod * SPLIT_BOOST).astype(np.int64)
+        self.err = np.zeros((self.channels, 2, self.width + 4), np.int32)
+        self.row = 0
+        self.joint = JOINT if self.channels >= JOINT else 0
+        self.lim = int(PAIR_LIMIT)
+
+    def jobs(self, band: np.ndarray, out: np.ndarray, groups: int):
+        """Callables that together diffuse ``band`` into ``out``: C, M and Y in one, the other
+        channels in another (on two threads when ``groups`` > 1), independent of each other."""
+        row0 = self.row
+        rest = (self.joint, self.channels)
+
+        def cmy():
+            cmy_rows(band, out, self.err, row0, self.wn, self.wdl, self.mod, self.smod,
+                     self.noise, self.offsets, self.lim)
+
+        def others():
+            if rest[1] > rest[0]:
+                vc_planes(band, out, self.err, row0, rest[0], rest[1], self.wn, self.wdl,
+                          self.mod, self.noise, self.offsets)
+
+        if not self.joint:
+            return [others]
+        if groups > 1 and rest[1] > rest[0]:
+            return [cmy, others]
+        return [lambda: (cmy(), others())]
+
+    def process(self, band: np.ndarray) -> np.ndarray:
+        """One band, in the calling thread."""
+        out = np.empty(band.shape, np.uint8)
+        for job in self.jobs(np.ascontiguousarray(band), out, 1):
+            job()
+        self.row += band.shape[0]
+        return out
