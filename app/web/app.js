@@ -8,7 +8,7 @@
 const $ = (id) => document.getElementById(id);
 let session = null;            // {name, role, csrf}
 let events = null;             // the EventSource
-let activeIds = new Set();     // jobs not finished, as last seen: one leaving -> history again
+let lastEnded = null;         // the server's mark of ended jobs, as last seen: a change -> history again
 const pace = new Map();        // printer -> {key, t0, done0}: the time left from the pace seen
 let hasReprint = true;         // the server offers POST /v1/jobs/ID/reprint (else requeue only)
 
@@ -104,10 +104,19 @@ function showApp() {
 // -- live: the event stream --------------------------------------------------------------------
 function follow() {
   if (events) events.close();
+  lastEnded = null;             // whoever calls follow() has just read the history
   events = new EventSource("/v1/events");
   events.onopen = () => live(true);
   events.addEventListener("printers", (e) => { live(true); showPrinters(JSON.parse(e.data)); });
   events.addEventListener("jobs", (e) => { live(true); showQueue(JSON.parse(e.data)); });
+  // the mark of ended jobs (docs/server.md "Live state"): a job that came and went between
+  // two samples of "jobs" still reaches the history
+  events.addEventListener("ended", (e) => {
+    live(true);
+    const mark = e.data;
+    if (lastEnded !== null && mark !== lastEnded) refreshHistory().catch(() => {});
+    lastEnded = mark;
+  });
   events.onerror = async () => {
     live(false);
     if (events && events.readyState === EventSource.CLOSED) {
@@ -255,6 +264,8 @@ function showPrinters(printers) {
     }
     if (p.fault) card.append(el("div", {class: "fault-text"}, `Fault: ${p.fault}`));
     else if (p.error) card.append(el("div", {class: "fault-text"}, p.error));
+    // warnings: nothing stops (docs/server.md "Rolls: the warning")
+    for (const w of p.warnings || []) card.append(el("div", {class: "warning-text"}, `Warning: ${w.message}`));
     if (operator()) {
       const acts = el("div", {class: "actions"});
       if (p.paused) acts.append(el("button", {onclick: () => act("resume", `/v1/printers/${encodeURIComponent(p.name)}/resume`)}, "Resume"));
@@ -302,9 +313,6 @@ function jobButtons(job) {
 }
 
 function showQueue(jobs) {
-  const ids = new Set(jobs.map((j) => j.id));
-  const ended = [...activeIds].some((id) => !ids.has(id));
-  activeIds = ids;
   const body = $("queue").tBodies[0];
   body.replaceChildren();
   const order = {printing: 0, queued: 1, held: 2};
@@ -325,7 +333,6 @@ function showQueue(jobs) {
   }
   $("queue-empty").hidden = jobs.length > 0;
   $("queue-count").textContent = jobs.length ? `(${jobs.length})` : "";
-  if (ended) refreshHistory().catch(() => {});
 }
 
 function showHistory(jobs) {
