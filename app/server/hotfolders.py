@@ -535,9 +535,12 @@ class HotFolders(threading.Thread):
                     job, _ = self.srv.queue_file(
                         f, name, fst.st_size, check=lambda: _check_same(fd, fst),
                         source=f"hot:{preset}", settings=dict(settings), preset=preset,
-                        client="hot-folder", hot_path=path)
+                        client="hot-folder", hot_path=path, fit=True)
                 except Invalid as exc:
-                    return self._refuse(pfd, preset, name, f"{name}: {exc}", sig)
+                    # a file that does not fit the paper is refused as the API refuses it,
+                    # in words that name it already (docs/server.md "Fit before it fails")
+                    why = str(exc) if str(exc).startswith(name) else f"{name}: {exc}"
+                    return self._refuse(pfd, preset, name, why, sig)
                 except FileChanged:
                     self.seen.pop(key, None)     # written to while copied: look again
                     return

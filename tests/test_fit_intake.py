@@ -1,0 +1,83 @@
+"""Fit checked when a job comes in by any door (issue 34 part 4; docs/server.md "Fit
+before it fails"): a file wider than the paper is refused as it arrives - a hot folder
+moves it to failed/ with the reason naming the file, the CUPS backend exits CANCEL (5,
+the CUPS backend contract: this job can never print) with one ERROR line naming it, an
+IPP Print-Job ends aborted with document-unprintable-error and the reason in its
+job-state-message (docs/ipp.md "A job that does not fit") - and none of them is queued.
+
+The file: 60 x 20 pixels tagged 0.3 pixels an inch, so 200 inches = 5,080 mm wide on a
+printer whose paper takes 3,190 mm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tifffile
+
+from support.images import random_planes, tiny_tiff
+from support.server import ServerProcess, inprocess_server, wait_for
+
+WIDE_WORDS = "is 5,080 mm wide: printer {printer}'s paper takes 3,190 mm"
+
+
+def wide_tiff(path):
+    planes = (random_planes(20, 60, seed=3) * 255).astype(np.uint8)
+    tifffile.imwrite(path, planes, photometric="separated", resolution=(0.3, 0.3),
+                     resolutionunit="INCH")
+    return path
+
+
+def test_a_hot_folder_file_wider_than_the_paper_goes_to_failed_naming_it(tmp_path):
+    srv = inprocess_server(tmp_path / "srv", scan_interval=0.1, settle_s=0.3, start_paused=True)
+    try:
+        folder = srv.root / "hot" / "default"
+        wide_tiff(tmp_path / "banner.tif").rename(folder / "banner.tif")
+        (folder / "small.tif").write_bytes(tiny_tiff())          # one that fits: queued
+        reason = folder / "failed" / "banner.tif.reason.txt"
+        wait_for(reason.exists, 30, what=reason.name)
+        text = reason.read_text()
+        assert text.startswith("banner.tif " + WIDE_WORDS.format(printer="main")), text
+        assert "fit-to-width" in text and str(srv.state_dir) not in text
+        assert (folder / "failed" / "banner.tif").exists() and not (folder / "banner.tif").exists()
+        small = wait_for(lambda: [j for j in srv.jobs() if j["name"] == "small.tif"], 30,
+                         what="small.tif queued")
+        assert [j["name"] for j in srv.jobs()] == ["small.tif"] and small[0]["state"] == "queued"
+        used = srv.spool.spool_files_in_use()
+        assert [p for p in srv.spool.spool_dir.iterdir() if str(p) not in used] == []
+    finally:
+        srv.stop(timeout=5)
+
+
+def test_the_cups_backend_cancels_a_job_wider_than_the_paper(tmp_path):
+    from test_cups_backend import CANCEL, run_backend, uri_of
+    srv = ServerProcess(tmp_path / "state", "--paused")
+    try:
+        r = run_backend(uri_of(srv.state), file=wide_tiff(tmp_path / "in.tif"),
+                        title="/home/alice/banner.tif", options="job-uuid=urn:uuid:wide-1")
+        assert r.returncode == CANCEL, r.err
+        [line] = [ln for ln in r.err.splitlines() if ln.startswith("ERROR: ")]
+        assert ("banner.tif " + WIDE_WORDS.format(printer="main")) in line, line
+        assert srv.client.jobs() == []
+    finally:
+        srv.stop()
+
+
+@pytest.mark.timeout(300)
+def test_an_ipp_print_job_wider_than_the_paper_ends_aborted_naming_it(tmp_path):
+    from private_cups import IppServe
+    from test_ipp import BINARY, print_job, wait_ipp_job
+    if BINARY is None:
+        pytest.fail("the Printer Application is not built (make app/ipp/wideprint-ipp)")
+    (tmp_path / "ipp").mkdir()
+    ipp = IppServe(tmp_path / "ipp", ["left"])
+    try:
+        a = print_job(tmp_path, ipp.auth_uri["left"], wide_tiff(tmp_path / "w.tif"),
+                      "image/tiff", "banner.tif")
+        done = wait_ipp_job(ipp.auth_uri["left"], a["job-id"], tmp_path)
+        assert done["job-state"] == 8, done                          # aborted
+        assert "document-unprintable-error" in done["job-state-reasons"], done
+        msg = done["job-state-message"]
+        assert msg.startswith("Not queued: banner.tif " + WIDE_WORDS.format(printer="left")), msg
+        assert ipp.client.jobs("queued,held,printing,done,failed,cancelled") == []
+    finally:
+        ipp.stop()
