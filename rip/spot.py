@@ -40,12 +40,15 @@ CXF_NS = "http://colorexchangeformat.com/CxF3-core"
 LIB_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
-def library_dir() -> Path:
-    """$WIDEPRINT_SPOT_DIR, else STATE/spots (STATE as app/server/config.py: the state
-    directory's environment variable, /var/lib/wideprint for root, else the user's)."""
+def library_dir(state_dir: str | os.PathLike | None = None) -> Path:
+    """$WIDEPRINT_SPOT_DIR, else STATE/spots: STATE is `state_dir` when given (a print
+    server's --state-dir, as app/medialib.py user_dir), else as app/server/config.py: the
+    state directory's environment variable, /var/lib/wideprint for root, else the user's."""
     env = os.environ.get("WIDEPRINT_SPOT_DIR")
     if env:
         return Path(env)
+    if state_dir is not None:
+        return Path(state_dir) / "spots"
     state = os.environ.get("WIDEPRINT_STATE_DIR")
     if state:
         return Path(state) / "spots"

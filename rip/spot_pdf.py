@@ -134,9 +134,45 @@ def spot_names(path: str) -> SpotUse:
 
 
 # -- the rewrite ---------------------------------------------------------------------------
-def _type4(recipes: list[tuple[float, ...]]) -> bytes:
-    """A PostScript calculator function: n tints -> 4 inks, each ink the sum of tint x
-    recipe over the colorants, at most 1."""
+def _pwl(samples) -> str:
+    """PostScript calculator code taking the tint t on the stack to the piecewise-linear
+    curve through `samples` (at tints 0, 1/(S-1), ..., 1): a binary tree of `ifelse`."""
+    last = len(samples) - 1
+
+    def seg(lo: int, hi: int) -> str:
+        if hi - lo == 1:
+            slope = (samples[hi] - samples[lo]) * last
+            return f"{lo / last:.5f} sub {slope:.5f} mul {samples[lo]:.5f} add"
+        mid = (lo + hi) // 2
+        return f"dup {mid / last:.5f} lt {{ {seg(lo, mid)} }} {{ {seg(mid, hi)} }} ifelse"
+    return seg(0, last)
+
+
+def _type4(recipes: list) -> bytes:
+    """A PostScript calculator function: n tints -> 4 inks, each ink the sum over the
+    colorants of tint x recipe (a colorant with a recipe: 4 ink fractions) or of the
+    colorant's own curve (one with samples: an (S, 4) array of inks at S even tints, the
+    alternate evaluated for it alone), at most 1."""
+    if all(len(r) == 4 and not hasattr(r[0], "__len__") for r in recipes):
+        return _type4_linear(recipes)
+    n = len(recipes)
+    ops: list[str] = []
+    for j in range(4):
+        ops.append("0")                                   # the ink's sum, above j inks
+        for i, r in enumerate(recipes):
+            curve = [float(v[j]) for v in r] if hasattr(r[0], "__len__") else None
+            if (curve is None and r[j] == 0) or (curve is not None and max(curve) == 0):
+                continue
+            ops.append(f"{(n - 1 - i) + j + 1} index")
+            ops.append(f"{r[j]:.5f} mul add" if curve is None else f"{_pwl(curve)} add")
+        ops.append("dup 1 gt { pop 1 } if dup 0 lt { pop 0 } if")
+    ops.append(f"{n + 4} 4 roll" if n else "")
+    ops += ["pop"] * n
+    return ("{ " + " ".join(o for o in ops if o) + " }").encode()
+
+
+def _type4_linear(recipes: list[tuple[float, ...]]) -> bytes:
+    """_type4 of colorants that all have recipes (the function as before the mixed case)."""
     n = len(recipes)
     ops: list[str] = []
     for j in range(4):
@@ -156,13 +192,17 @@ def _type4(recipes: list[tuple[float, ...]]) -> bytes:
     return ("{ " + " ".join(o for o in ops if o) + " }").encode()
 
 
-def rewrite(src: str, dst: str, recipe_of: Callable[[str], tuple | None], output_icc: bytes | None) -> dict:
+def rewrite(src: str, dst: str, recipe_of: Callable[[str], tuple | None], output_icc: bytes | None,
+            sample_alone: Callable | None = None) -> dict:
     """Write `dst`: `src` with every Separation/DeviceN whose colorants all have a recipe
     (`recipe_of(name)`: ink fractions, or None) printing it, and every cut colour removed
     from the print (docs/spot.md).  `output_icc`: the job's output profile (the recipes'
-    space), or None (DeviceCMYK is the output).  Returns counts for the log."""
+    space), or None (DeviceCMYK is the output).  `sample_alone(pdf, space, [i, ...])`:
+    for a DeviceN mixing library colours with colorants in no library, each of those
+    colorants' inks (an (S, 4) array at S even tints) as the space's alternate prints it
+    alone; without it such a space keeps its alternate.  Returns counts for the log."""
     pikepdf = _pikepdf()
-    stats = {"separation": 0, "devicen": 0, "cut_ops": 0}
+    stats = {"separation": 0, "devicen": 0, "devicen_mixed": 0, "cut_ops": 0}
     with pikepdf.open(src) as pdf:
         alt = pikepdf.Name.DeviceCMYK
         if output_icc:
@@ -173,7 +213,7 @@ def rewrite(src: str, dst: str, recipe_of: Callable[[str], tuple | None], output
         done: set = set()
         for res in _page_resources(pdf):
             for cs in _spaces(res, seen):
-                _recolour(pdf, cs, recipe_of, alt, stats, done)
+                _recolour(pdf, cs, recipe_of, alt, stats, done, sample_alone)
         _remove_cut(pdf, stats)
         pdf.save(dst)
     return stats
@@ -190,7 +230,7 @@ def _base_spaces(cs) -> Iterator:
             yield from _base_spaces(cs[1])
 
 
-def _recolour(pdf, cs, recipe_of, alt, stats: dict, done: set) -> None:
+def _recolour(pdf, cs, recipe_of, alt, stats: dict, done: set, sample_alone=None) -> None:
     pikepdf = _pikepdf()
     for arr in _base_spaces(cs):
         key = id(arr) if not arr.is_indirect else arr.objgen
@@ -199,8 +239,10 @@ def _recolour(pdf, cs, recipe_of, alt, stats: dict, done: set) -> None:
         done.add(key)
         head = _name(arr[0])
         names = [_name(arr[1])] if head == "Separation" else [_name(n) for n in arr[1]]
-        recipes: list[tuple[float, ...]] = []
-        for n in names:
+        recipes: list = []
+        unknown: list[int] = []
+        library = False
+        for i, n in enumerate(names):
             if is_cut_name(n) or n == "None":
                 recipes.append((0.0, 0.0, 0.0, 0.0))
             elif n.casefold() in PROCESS and head == "DeviceN":
@@ -208,23 +250,34 @@ def _recolour(pdf, cs, recipe_of, alt, stats: dict, done: set) -> None:
             else:
                 r = recipe_of(n)
                 if r is None:
-                    break
-                recipes.append(tuple(float(v) for v in r))
+                    unknown.append(i)
+                    recipes.append(None)
+                else:
+                    library = True
+                    recipes.append(tuple(float(v) for v in r))
+        if unknown and head == "DeviceN" and library and sample_alone is not None:
+            # a library colour beside colorants in no library (docs/spot.md "A DeviceN that
+            # mixes"): the library colour by its recipe, each other colorant as the
+            # document's alternate prints it alone
+            for i, curve in sample_alone(pdf, arr, unknown).items():
+                recipes[i] = [tuple(float(v) for v in row) for row in curve]
+            stats["devicen_mixed"] += 1
+        elif unknown:
+            continue                        # the whole space through its alternate, as before
+        if all(is_cut_name(n) or n == "None" for n in names):
+            continue                    # a cut space: its painting is removed instead
+        if head == "Separation":
+            fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0],
+                                    C1=[round(v, 5) for v in recipes[0]], N=1)
+            stats["separation"] += 1
         else:
-            if all(is_cut_name(n) or n == "None" for n in names):
-                continue                    # a cut space: its painting is removed instead
-            if head == "Separation":
-                fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=[0, 0, 0, 0],
-                                        C1=[round(v, 5) for v in recipes[0]], N=1)
-                stats["separation"] += 1
-            else:
-                fn = pdf.make_stream(_type4(recipes))
-                fn.FunctionType = 4
-                fn.Domain = pikepdf.Array([0, 1] * len(names))
-                fn.Range = pikepdf.Array([0, 1] * 4)
-                stats["devicen"] += 1
-            arr[2] = alt
-            arr[3] = fn
+            fn = pdf.make_stream(_type4(recipes))
+            fn.FunctionType = 4
+            fn.Domain = pikepdf.Array([0, 1] * len(names))
+            fn.Range = pikepdf.Array([0, 1] * 4)
+            stats["devicen"] += 1
+        arr[2] = alt
+        arr[3] = fn
 
 
 def _is_cut_space(cs) -> bool:
