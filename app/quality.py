@@ -7,9 +7,9 @@ The flat tints are found by themselves: strips of ink running along the feed, sp
 paper (the banding chart, `wideprint test-print banding-scan`, is ten such strips between
 two K bars).  Per strip, on its inner area:
 
-- banding: the lightness profile along the feed (row means), split into the strip's left and
-  right halves; their cross-spectrum keeps what both halves share - variation across the
-  whole width, the banding - and averages out the grain, which the halves do not share;
+- banding: the lightness profile along the feed (row means) of GROUPS column groups of the
+  strip; the cross-spectra of groups apart keep what they share - variation across the
+  whole width, the banding - and average out the grain, which they do not share;
   weighted by the eye's contrast sensitivity (Dooley-Shaw's visual transfer function at the
   viewing distance) and summed: an RMS ΔL* the eye sees.  Also the amplitude at the feed's
   advance and the swath period and their harmonics, when the weave is known;
@@ -40,7 +40,9 @@ MIN_STRIP_MM = 3.0          # a run of ink narrower than this is not a strip
 MIN_LENGTH_MM = 8.0         # ... or shorter along the feed
 INK_DL = 4.0                # a pixel this much darker than paper (L*) holds ink
 HARMONICS = 4               # of the advance and the swath frequency, reported
-GROUPS = 4                  # column groups of a strip whose shared variation is the banding
+GROUPS = 5                  # column groups of a strip whose shared variation is the banding
+PAIR_GAP = 2                # ... of which only groups this far apart are compared: the
+                            # halftone's own texture reaches ~2 mm across (docs/quality.md)
 PERIOD_MIN_MM, PERIOD_MAX_MM = 1.0, 40.0    # banding periods searched
 PERIOD_SMOOTH_MM = 0.1      # the profile smoothed (Gaussian sigma) before its period is found
 PERIOD_MIN_CORR = 0.2       # a period explains at least this share of the profile's variance
@@ -194,9 +196,13 @@ def _hann(n: int) -> np.ndarray:
 
 def banding_spectrum(area: np.ndarray, pix_mm: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(frequencies cycles/mm, coherent power per bin, window norm): the mean cross-spectrum
-    of every pair of GROUPS column groups' row-mean profiles, Hann-windowed, linear trend
-    removed.  Power per bin sums to the variance the groups share (the banding); the grain,
-    which no two groups share, averages out of it instead of adding to it."""
+    of the pairs of GROUPS column groups' row-mean profiles at least PAIR_GAP groups apart,
+    Hann-windowed, linear trend removed.  Power per bin sums to the variance the groups
+    share (the banding); the grain, which no two distant groups share, averages out of it
+    instead of adding to it.  Neighbouring groups are not compared: error diffusion's
+    texture is correlated over ~2 mm across the sweep (positively at mid-tones, its worms;
+    negatively in light tints, its blue noise), which read as banding on a perfect printer
+    (docs/quality.md "The floor")."""
     h, w = area.shape
     edges = np.linspace(0, w, GROUPS + 1).astype(int)
     y = np.arange(h, dtype=np.float64)
@@ -208,8 +214,8 @@ def banding_spectrum(area: np.ndarray, pix_mm: float) -> tuple[np.ndarray, np.nd
         spectra.append(np.fft.rfft(p * win))
     norm = float(h * np.sum(win ** 2))
     f = np.array(spectra)
-    total = np.abs(f.sum(axis=0)) ** 2 - (np.abs(f) ** 2).sum(axis=0)   # sum over pairs i != j
-    cross = total / (GROUPS * (GROUPS - 1))
+    pairs = [(i, j) for i in range(GROUPS) for j in range(i + PAIR_GAP, GROUPS)]
+    cross = sum((f[i] * np.conj(f[j])).real for i, j in pairs) / len(pairs)
     cross[1:-1] *= 2.0                      # rfft: the negative frequencies too
     if h % 2 == 1:
         cross[-1] *= 2.0
