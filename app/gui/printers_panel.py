@@ -78,6 +78,7 @@ class PrinterCard(QFrame):
         self.fault = _fixed_lines(QLabel(""), 3)      # the fault and its advice, whole at 1366 px
         self.fault.setObjectName("printer_fault")
         self.fault.setStyleSheet("color: #c62828;")
+        self.fault.setProperty("colour", "#c62828")
         g.addWidget(self.fault, 3, 0, 1, 3)
         row = QHBoxLayout()
         self.pause = QPushButton("Pause")
@@ -197,6 +198,10 @@ class PrinterCard(QFrame):
             text = "<span style='color:#2e7d32'><b>Ready</b></span> — waiting for jobs"
         if p.get("capped") and not cur and not fault:
             text += " (heads capped)"
+        # the server's warnings (docs/server.md "Rolls: the warning"): nothing stops
+        warnings = [w["message"] for w in p.get("warnings") or [] if w.get("message")]
+        if warnings:
+            text += " · <span style='color:#b26a00'><b>roll low</b></span>"
         self.state.setText(text)
         self.state.setToolTip(p.get("reason") or "")
         if cur:
@@ -242,10 +247,18 @@ class PrinterCard(QFrame):
                                    + roll_text(p.get("roll")))
             self.telemetry.setToolTip("the paper's width less the side margins; measured by "
                                       "the printer at its last job")
+        # the fault's place shows a warning, in amber, while there is no fault
+        colour = "#c62828" if fault or not warnings else "#b26a00"
+        if self.fault.property("colour") != colour:
+            self.fault.setStyleSheet(f"color: {colour};")
+            self.fault.setProperty("colour", colour)
         if fault:
             advice = plain_message(fault)
             self.fault.setText(short_paths(fault) + (f" {advice}" if advice else ""))
-            self.fault.setToolTip(fault)
+            self.fault.setToolTip("\n".join([fault] + warnings))
+        elif warnings:
+            self.fault.setText("Warning: " + " ".join(warnings))
+            self.fault.setToolTip("\n".join(warnings))
         else:
             self.fault.setText("")
             self.fault.setToolTip("")

@@ -156,10 +156,16 @@ def printer_line(p: dict) -> str:
         reasons.append("media-empty" if "paper out" in fault else "other")
     if p["state"] == "offline":
         reasons.append("offline")
+    # the roll running low (docs/ipp.md "The roll running low"): a warning, the printer goes on
+    warnings = [w for w in p.get("warnings") or [] if w.get("kind") == "media-low"]
+    if warnings:
+        reasons.append("media-low-warning")
     if p.get("paused") and p.get("reason"):
         message = p["reason"]
     elif p.get("error"):
         message = f"{p['state']}: {p['error']}"
+    elif warnings:
+        message = warnings[0]["message"]
     else:
         message = ""
     return "\t".join(["printer", p["name"], p["state"], "1" if p.get("paused") else "0",

@@ -740,12 +740,14 @@ reason_bits(const char *reasons)
     bits |= PAPPL_PREASON_MEDIA_JAM;
   if (strstr(reasons, "offline"))
     bits |= PAPPL_PREASON_OFFLINE;
+  if (strstr(reasons, "media-low"))	// the roll running low: a warning (docs/ipp.md)
+    bits |= PAPPL_PREASON_MEDIA_LOW;
   if (strstr(reasons, "other"))
     bits |= PAPPL_PREASON_OTHER;
   return (bits);
 }
 
-#define WP_REASONS (PAPPL_PREASON_MEDIA_EMPTY | PAPPL_PREASON_MEDIA_NEEDED | PAPPL_PREASON_MEDIA_JAM | PAPPL_PREASON_OFFLINE | PAPPL_PREASON_OTHER)
+#define WP_REASONS (PAPPL_PREASON_MEDIA_EMPTY | PAPPL_PREASON_MEDIA_LOW | PAPPL_PREASON_MEDIA_NEEDED | PAPPL_PREASON_MEDIA_JAM | PAPPL_PREASON_OFFLINE | PAPPL_PREASON_OTHER)
 
 
 static ipp_t *
@@ -800,8 +802,12 @@ publish(wp_printer_t *p)		// the paper and the state in words, to PAPPL
   if (p->message[0])
   {
     char alert[256];
-    snprintf(alert, sizeof(alert), "code=%s;severity=%s;group=other;", p->paused ? "stopped" : "other",
-             !strcmp(p->state, "fault") || !strcmp(p->state, "offline") ? "critical" : "warning");
+    bool critical = !strcmp(p->state, "fault") || !strcmp(p->state, "offline");
+    // the roll running low is a warning (PWG 5100.9 printer-alert: its severity; the
+    // Printer MIB's alert code for a supply of input media running low)
+    snprintf(alert, sizeof(alert), "code=%s;severity=%s;group=other;",
+             p->paused ? "stopped" : !critical && strstr(p->reasons, "media-low") ? "inputMediaSupplyLow" : "other",
+             critical ? "critical" : "warning");
     ippAddOctetString(attrs, IPP_TAG_PRINTER, "printer-alert", alert, (int)strlen(alert));
     ippAddString(attrs, IPP_TAG_PRINTER, IPP_TAG_TEXT, "printer-alert-description", NULL, p->message);
   }

@@ -146,3 +146,45 @@ def short_of_roll(roll: dict | None, need_mm: float) -> str:
         return ""
     return (f"needs {need_mm / 1000:,.2f} m of paper, the {roll['media']} roll has "
             f"{left / 1000:,.2f} m left")
+
+
+# a job the worker held because the roll could not hold it says so in its message
+# (worker.py _next_job); the roll's warning keeps counting it until a new roll is loaded
+ROLL_HELD = "held before printing; load a new roll"
+#: the roll left, over what the jobs waiting need, below which the printer warns (m)
+WARN_SPARE_M = 1.0
+
+
+def roll_warning(roll: dict | None, waiting: list[tuple[dict, float]],
+                 spare_m: float = WARN_SPARE_M) -> dict | None:
+    """The printer's warning before a job runs off the roll (docs/server.md "Rolls: the
+    warning"): `waiting` is each job the printer will take, in the order it takes them,
+    with the paper it needs (mm; the printing job's copies left first).  A warning - not a
+    fault, nothing stops - when the roll left is less than what they need plus `spare_m`:
+    {kind: "media-low", message, remaining_m, need_m, job, name} where job/name is the
+    first job the roll cannot hold (None when all fit and only the spare is short).  None
+    when the roll's length is not known or it holds them with the spare."""
+    if roll is None or roll.get("remaining_mm") is None:
+        return None
+    left = float(roll["remaining_mm"])
+    need = sum(mm for _, mm in waiting)
+    if left >= need + spare_m * 1000:
+        return None
+    short, total = None, 0.0
+    for job, mm in waiting:
+        total += mm
+        if total > left:
+            short = job
+            break
+    media = roll.get("media") or "the"
+    text = (f"roll low: {left / 1000:,.2f} m of {media} left"
+            + (f", the {len(waiting)} job{'s' if len(waiting) != 1 else ''} waiting need "
+               f"{need / 1000:,.2f} m" if waiting else ""))
+    if short is not None:
+        text += (f"; {short['name']} (job {short['id']}) will not fit: load a new roll "
+                 f"before it prints, or it is held")
+    else:
+        text += f" (less than {spare_m:g} m to spare): have a new roll ready"
+    return dict(kind="media-low", message=text, remaining_m=round(left / 1000, 3),
+                need_m=round(need / 1000, 3), job=None if short is None else short["id"],
+                name=None if short is None else short["name"])
