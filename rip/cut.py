@@ -99,29 +99,38 @@ def _resolve_space(name, resources) -> tuple[str, ...]:
     return ()
 
 
-def extract_pdf(path: str, page_number: int, patterns: Iterable[str] | None = None) -> list[RawPath]:
-    """The cut paths of page `page_number` (1-based) of a PDF, in default user space."""
+def extract_pdf(path: str, page_number: int, patterns: Iterable[str] | None = None,
+                text: list | None = None) -> list[RawPath]:
+    """The cut paths of page `page_number` (1-based) of a PDF, in default user space;
+    `text` (when given) gets the cut name of every text shown in a cut colour (its glyphs
+    are no paths here: cut_job outlines them, docs/cut.md "Text in a cut colour")."""
     import pikepdf
     patterns = tuple(patterns) if patterns is not None else None
     out: list[RawPath] = []
     with pikepdf.open(path) as pdf:
         page = pdf.pages[page_number - 1]
-        _run(page.obj, page.obj.get("/Resources"), np.eye(3), patterns, out, depth=0)
+        _run(page.obj, page.obj.get("/Resources"), np.eye(3), patterns, out, depth=0, text=text)
     return out
 
 
-def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], depth: int) -> None:
+#: text render modes that fill, and that stroke (PDF 9.3.6)
+_TEXT_FILLS, _TEXT_STROKES = (0, 2, 4, 6), (1, 2, 5, 6)
+
+
+def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], depth: int,
+         text: list | None = None) -> None:
     import pikepdf
     if depth > 12:                                   # forms calling forms: a cycle or an attack
         return
     stack: list[tuple] = []
     ctm = ctm0
     stroke, fill = _Colour(), _Colour()
+    mode = 0                                         # the text render mode (Tr)
     sub: list = []                                   # subpaths being built
     cur: list | None = None                          # [start, segments, closed]
     point = np.zeros(2)
 
-    def paint(colour: _Colour) -> None:
+    def paint(colour: _Colour, fills: bool = False) -> None:
         name = colour.cut_name(patterns)
         if not name:
             return
@@ -129,9 +138,10 @@ def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], dept
         for start, segs, closed in sub:
             if not segs:
                 continue
+            # a fill closes every subpath (PDF 8.5.3.3): a filled shape is cut all round
             raw.subpaths.append((_apply(ctm, start)[0],
                                  [(k, _apply(ctm, v).reshape(-1, 2) if k == "C" else _apply(ctm, v)[0])
-                                  for k, v in segs], closed))
+                                  for k, v in segs], closed or fills))
         if raw.subpaths:
             out.append(raw)
 
@@ -145,10 +155,17 @@ def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], dept
         operands, o = ins.operands, str(ins.operator)
         nums = [float(x) for x in operands if isinstance(x, (int, float, Decimal)) and not isinstance(x, bool)]
         if o == "q":
-            stack.append((ctm, stroke, fill))
+            stack.append((ctm, stroke, fill, mode))
         elif o == "Q":
             if stack:
-                ctm, stroke, fill = stack.pop()
+                ctm, stroke, fill, mode = stack.pop()
+        elif o == "Tr" and len(nums) == 1:
+            mode = int(nums[0])
+        elif o in ("Tj", "TJ", "'", '"') and text is not None:
+            name = (fill.cut_name(patterns) if mode in _TEXT_FILLS else "") or \
+                (stroke.cut_name(patterns) if mode in _TEXT_STROKES else "")
+            if name:
+                text.append(name)
         elif o == "cm" and len(nums) == 6:
             ctm = _mul(_matrix(*nums), ctm)
         elif o == "m" and len(nums) == 2:
@@ -183,7 +200,7 @@ def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], dept
             if o in ("S", "s", "B", "B*", "b", "b*"):
                 paint(stroke)
             if o in ("f", "F", "f*", "B", "B*", "b", "b*") and not (o[0] in "Bb" and stroke.cut_name(patterns)):
-                paint(fill)                          # a B in the cut colour is one path, not two
+                paint(fill, fills=True)              # a B in the cut colour is one path, not two
             sub, cur = [], None
         elif o in ("CS", "cs") and operands:
             names = _resolve_space(operands[0], resources)
@@ -213,7 +230,8 @@ def _run(holder, resources, ctm0: np.ndarray, patterns, out: list[RawPath], dept
             if xo is not None and xo.get("/Subtype") == "/Form":
                 m = xo.get("/Matrix")
                 fm = _matrix(*[float(v) for v in m]) if m is not None else np.eye(3)
-                _run(xo, xo.get("/Resources", resources), _mul(fm, ctm), patterns, out, depth + 1)
+                _run(xo, xo.get("/Resources", resources), _mul(fm, ctm), patterns, out, depth + 1,
+                     text)
 
 
 def ps_to_pdf(path: str, fmt: str, directory: str) -> str:
@@ -230,6 +248,39 @@ def ps_to_pdf(path: str, fmt: str, directory: str) -> str:
         raise ValueError(f"{path}: Ghostscript could not read its cut paths: "
                          f"{run.stderr.decode(errors='replace').strip()[-300:]}")
     return out
+
+
+def outline_text(pdf: str, page, directory: str):
+    """Page `page` (a GsPage) of `pdf` with its text drawn as glyph outlines (Ghostscript's
+    pdfwrite, -dNoOutputFonts: each glyph a filled or stroked path in the text's colour,
+    spot colour spaces kept), cropped to the box the print renders (the page's box
+    switches) and unrotated: (the new PDF, its GsPage with that box as its MediaBox), read
+    the way a PostScript file's distilled page is."""
+    from dataclasses import replace as _replace
+    from .ghostscript import gs_path, probe
+    out = os.path.join(directory, f"outlined-{page.number}.pdf")
+    args = [gs_path(), "-q", "-dSAFER", "-dBATCH", "-dNOPAUSE", "-sDEVICE=pdfwrite",
+            "-dNoOutputFonts", "-dCompressPages=false", "-dAutoRotatePages=/None",
+            "-sColorConversionStrategy=LeaveColorUnchanged", f"-sPageList={page.number}",
+            *page.flags, f"-sOutputFile={out}", "-f", os.path.abspath(pdf)]
+    run = subprocess.run(args, capture_output=True, timeout=300)
+    if run.returncode != 0 or not os.path.exists(out):
+        raise ValueError(f"{pdf}: Ghostscript could not outline the text in a cut colour on page "
+                         f"{page.number}: {run.stderr.decode(errors='replace').strip()[-300:]}")
+    conv, _ = probe(out, "pdf", "media")
+    return out, _replace(page, number=1, boxes=conv[0].boxes, box="media", rotate=conv[0].rotate,
+                         flags=(), user_unit=conv[0].user_unit)
+
+
+def _page_paths(pdf: str, page, patterns, directory: str):
+    """(GsPage, cut paths) of a page: read from the file, or, when it shows text in a cut
+    colour, from its copy with the text outlined (the outlines and every other cut path)."""
+    text: list = []
+    raws = extract_pdf(pdf, page.number, patterns, text)
+    if text:
+        outlined, opage = outline_text(pdf, page, directory)
+        return opage, extract_pdf(outlined, 1, patterns)
+    return page, raws
 
 
 # -- page to sheet -------------------------------------------------------------------------
@@ -390,12 +441,12 @@ def cut_job(paths, settings, profile, patterns: Iterable[str] | None = None, pla
             if key not in cache:
                 sub = os.path.join(tmp, str(len(cache)))
                 os.makedirs(sub)
-                cache[key] = [(pdf, page, raster, y, extract_pdf(pdf, page.number, patterns))
+                cache[key] = [(pdf, *_page_paths(pdf, page, patterns, sub), raster, y)
                               for pdf, page, raster, y in _doc_pages(path, st, profile, sub)]
             crop_mm = None
             if crop is not None:
                 crop_mm = (g.mm_x(sx), g.mm_y(sy), g.mm_x(sx + crop[2] - crop[0]), g.mm_y(sy + crop[3] - crop[1]))
-            for _pdf, page, raster, y, raws in cache[key]:
+            for _pdf, page, raws, raster, y in cache[key]:
                 m = page_to_sheet(page, st.placement, raster, y, (sx, sy), crop) @ mm
                 for raw in raws:
                     for start, segs, closed in raw.subpaths:
