@@ -241,3 +241,61 @@ def test_standalone_printer_outlives_the_server(scenarios, point_id):
 def test_standalone_printer_power_cycled_while_the_server_was_down(scenarios, point_id):
     held, prints = outcome(scenarios, "power-cycled", point_id)
     assert held == (point_id in MID_COPY)
+
+
+# -- the roll: a copy caught by a crash feeds it once, whole --------------------------------------
+@pytest.mark.parametrize("printer", ["standalone", "in-process"])
+def test_a_copy_caught_by_a_crash_takes_its_feed_off_the_roll(tmp_path, job_file, printer):
+    """docs/server.md "Rolls": the feed a copy made before the server died comes off the
+    roll with the row that accounts the copy - the resumed copy's whole feed (the printer
+    outlived the server: its paper count from the checkpoint's `paper0`), or, for the copy
+    caught part-way on a printer that died too, the feed the stroke plan puts under its
+    strokes on the sheet, in the restart's transaction.  Never lost, never twice."""
+    src, planes, strokes = job_file
+    state = tmp_path / "state"
+    emu = Emulator(tmp_path) if printer == "standalone" else None
+    device = emu.start() if emu else "emulator"
+    media_dir = None if emu else tmp_path / "media"
+    prof = load_profile()
+    step_mm = prof.feed_um_per_step / 1000.0
+    try:
+        srv, client = start_server(state, device, media_dir=media_dir, crash="checkpoint:3")
+        client.roll("main", {"media": "vinyl-300", "length_m": 50})
+        jid = client.submit(src, copies=COPIES, settings=SETTINGS)["job"]["id"]
+        assert srv.wait(120) == -signal.SIGKILL, srv.stderr.read()
+        srv.communicate()
+        srv, client = start_server(state, device, media_dir=media_dir)
+        try:
+            j = wait_for(lambda: (lambda j: j if j["state"] in FINAL or j["state"] == "held"
+                                  else None)(client.job(jid)), 120, what="the job to settle")
+            if j["state"] == "held":
+                client.action(jid, "release")
+            assert client.wait(jid, timeout=120)["state"] == "done"
+            prints = client.report(jid)
+            left = client.roll("main")["roll"]["remaining_mm"]
+        finally:
+            assert "Traceback" not in stop(srv)
+    finally:
+        if emu is not None:
+            emu.stop()
+    done = [p for p in prints if p["outcome"] == "done"]
+    assert [p["copy"] for p in done] == [1, 2], prints
+    # each done copy fed a whole copy: the one resumed after the crash as much as the other
+    assert done[0]["paper_mm"] > 0 and abs(done[0]["paper_mm"] - done[1]["paper_mm"]) <= step_mm, done
+    interrupted = [p for p in prints if p["outcome"] == "interrupted"]
+    if printer == "in-process":
+        # two strokes were on the sheet (checkpoints: JOB_BEGIN, stroke 0, stroke 1): the
+        # paper under them, fed from where the copy began, top margin none
+        [row] = interrupted
+        rip = RipJob(str(src), RipSettings(**SETTINGS), prof)
+        try:
+            plan = rip.planner()
+            want = prof.feed_steps_for_rows(plan.top_row(1) - plan.top_row(0)) * step_mm
+        finally:
+            rip.close()
+        assert row["strokes_printed"] == 2 and row["paper_mm"] == pytest.approx(want, abs=1e-3)
+        assert want > 0
+    else:
+        assert interrupted == [] and done[0]["resumed"]
+    # and the roll lost exactly what the rows say, once
+    assert left == pytest.approx(50_000 - sum(p["paper_mm"] for p in prints), abs=1e-6)

@@ -800,7 +800,8 @@ class PrintServer:
                             dict(job=live.job, version=live.version),
                             state=w.printer_state, error=w.disk_wait or w.printer_error, fault=w.fault or None,
                             paused=w.paused, reason=w.pause_reason, capped=w.capped,
-                            current=cur, roll=self.rolls.get(name)))
+                            current=cur, roll=self.rolls.get(name),
+                            warnings=w.roll_warnings()))      # docs/server.md "Rolls: the warning"
         return out
 
     def hot_done(self, job: dict, state: str, message: str) -> None:

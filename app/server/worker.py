@@ -16,6 +16,7 @@ from typing import Any
 from . import archive, crashpoints, fsck
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .ripped import planes_job
+from .rolls import ROLL_HELD
 from .spool import COLORS, disk_full
 from .validate import job_rip_settings
 
@@ -75,6 +76,7 @@ class Worker(threading.Thread):
         self._profile_mtime = self._mtime(self.profile.path)
         self._next_expiry = time.monotonic() + 60   # the server expired them at start-up
         self._steps0: int | None = None    # the paper's position when this copy's run began
+        self._fed_before = 0.0             # mm this copy fed before a crash (a resumed copy)
         self._fed_by = None                # the PrintJob whose telemetry tells where it is now
 
     # -- recording state changes on a disk that may be full ----------------------------------
@@ -211,7 +213,7 @@ class Worker(threading.Thread):
             self.printer_state = "printing"
             pj = PrintJob(self._device(), rip, job_id=job_id, head_care=self._care())
             self.job = self._fed_by = pj
-            self._steps0 = self._paper_steps(self._device())
+            self._steps0, self._fed_before = self._paper_steps(self._device()), 0.0
             try:
                 rep = pj.run()
             finally:                         # a test print's paper comes off the roll too
@@ -391,10 +393,54 @@ class Worker(threading.Thread):
             short = self.roll_short(job)
             if not short:
                 return job
-            msg = (f"{job['name']}: {short}: held before printing; load a new roll "
+            msg = (f"{job['name']}: {short}: {ROLL_HELD} "
                    f"(wideprint printer roll load) and release it, or release it with --force")
             if self.spool.hold_for_roll(job["id"], msg) is not None:
                 log.warning("printer %s: job %s %s", self.name_, job["id"], msg)
+
+    ROLL_WARNING_EVERY_S = 1.0         # the warning is worked out at most once a second
+
+    def roll_warnings(self) -> list[dict]:
+        """This printer's warnings (not faults: nothing stops): the roll left is less than
+        what the jobs it will print need, plus a metre to spare (docs/server.md "Rolls:
+        the warning").  The jobs: the one printing (its copies left), then the queued
+        ones for this printer (for any printer too when it is the only one), then those
+        held because the roll could not hold them.  A new warning is logged once."""
+        from .rolls import paper_per_copy_mm, roll_warning
+        now = time.monotonic()
+        roll = self.srv.rolls.get(self.name_)
+        cached = getattr(self, "_roll_warned", None)
+        if cached is not None and now - cached[0] < self.ROLL_WARNING_EVERY_S \
+                and cached[2] == roll:                 # a roll loaded or set: at once
+            return cached[1]
+        warning = None
+        if roll is not None and roll.get("remaining_mm") is not None:
+            only = len(self.srv.workers) == 1
+            cur = self.current
+            jobs = [self.spool.get(cur["id"])] if cur and cur.get("id") else []
+            jobs += [j for j in self.spool.next_jobs(self.name_, limit=200)
+                     if j["printer"] == self.name_ or only]
+            jobs += [j for j in self.spool.jobs(("held",))
+                     if ROLL_HELD in (j["message"] or "")
+                     and (j["printer"] == self.name_ or (only and j["printer"] is None))]
+            waiting, seen = [], set()
+            for job in jobs:
+                if job is None or job["id"] in seen:
+                    continue
+                seen.add(job["id"])
+                size = self.srv.job_size_mm(job, self.profile)
+                if size is None:
+                    continue
+                n = max(1, job["copies"] - job["copies_done"])
+                top = float((job["settings"].get("placement") or {}).get("top_mm") or 0.0)
+                waiting.append((job, n * paper_per_copy_mm(self.profile, size[1], top)))
+            warning = roll_warning(roll, waiting)
+        out = [warning] if warning else []
+        before = cached[1] if cached is not None else []
+        if out and (not before or before[0]["job"] != out[0]["job"]):
+            log.warning("printer %s: %s", self.name_, out[0]["message"])
+        self._roll_warned = (now, out, roll)
+        return out
 
     def roll_short(self, job: dict, copies: int | None = None) -> str:
         """Why this printer's roll cannot hold `copies` (default: the job's copies left) of
@@ -554,7 +600,7 @@ class Worker(threading.Thread):
                 job = self.spool.get(job_id)
                 resumed = False
             self.current.update(copy=copy, state="ripping", stroke_index=None, strokes_printed=0)
-            self._steps0, self._fed_by = None, None
+            self._steps0, self._fed_by, self._fed_before = None, None, 0.0
             cp = job["checkpoint"] if first else None
             first = False
             started = job["copy_started"] or time.time()
@@ -605,6 +651,11 @@ class Worker(threading.Thread):
                     return
                 epoch = job.get("epoch") or self.spool.epoch(self.name_)
                 self._steps0 = self._paper_steps(dev)
+                if cp is not None:
+                    # the copy was on the sheet when the server stopped: what it fed then
+                    # is this copy's too, and comes off the roll with its row (docs/server.md
+                    # "Rolls": resumed, restarted or counted done after a crash)
+                    self._fed_before = self._fed_before_crash(dev, cp, rip, rs)
 
                 def on_event(kind, **kw):
                     cur = self.current
@@ -792,13 +843,43 @@ class Worker(threading.Thread):
             return None
 
     def _paper_fed_mm(self) -> float:
-        """The paper this copy's run fed (docs/server.md "Rolls"): the printer's paper
-        position now (as last read by the job) less where it was when the run began."""
+        """The paper this copy fed (docs/server.md "Rolls"): the printer's paper position
+        now (as last read by the job) less where it was when the run began, plus what the
+        copy fed before a crash it was resumed from (`_fed_before_crash`)."""
         pj, s0 = self._fed_by, self._steps0
         if pj is None or s0 is None:
-            return 0.0
+            return round(self._fed_before, 3)
         steps = int(pj.telemetry.paper_steps) - s0
-        return round(max(0, steps) * self.profile.feed_um_per_step / 1000.0, 3)
+        return round(self._fed_before + max(0, steps) * self.profile.feed_um_per_step / 1000.0, 3)
+
+    def _fed_before_crash(self, dev, cp: dict, rip, rs) -> float:
+        """The paper (mm) a copy fed before the server stopped in it, from its checkpoint
+        (docs/server.md "Crash recovery"): on the same power-up of the printer (JOB_STATUS's
+        boot is the checkpoint's) the paper's position now less where the copy began
+        (`paper0`) - the printer's own count; after the printer was restarted (its count
+        began again) the feed the stroke plan puts under the last stroke on the sheet
+        (`next_stroke` - 1), top margin included.  0 when neither can be known."""
+        from ...driver.printer import Printer
+        prof = self.profile
+        now, paper0 = self._paper_steps(dev), cp.get("paper0")
+        try:
+            js = Printer(dev).job_status()
+        except Exception:  # noqa: BLE001 - the plan below still tells
+            js = None
+        if js is not None and cp.get("boot") is not None and js.boot == cp["boot"] \
+                and now is not None and paper0 is not None:
+            return max(0, now - int(paper0)) * prof.feed_um_per_step / 1000.0
+        n = int(cp.get("next_stroke", 0))
+        if n <= 0 or not hasattr(rip, "planner"):
+            return 0.0
+        try:
+            planner = rip.planner()
+            top = int(round(float(rs.placement.top_mm) * 1000 / prof.row_um))
+            rows = planner.top_row(min(n, planner.total_strokes) - 1) - planner.top_row(0) + top
+        except Exception:  # noqa: BLE001 - the count is kept when it can be
+            log.debug("printer %s: the feed before the crash not known", self.name_, exc_info=True)
+            return 0.0
+        return max(0, prof.feed_steps_for_rows(rows)) * prof.feed_um_per_step / 1000.0
 
     def _print_row(self, job: dict, copy: int, started: float, rep, outcome: str, message: str,
                    resumed: bool) -> dict:
