@@ -171,3 +171,17 @@ def test_the_web_page_shows_the_warning_on_the_printers_card(tmp_path):
         if driver is not None:
             driver.quit()
         srv.stop(timeout=5)
+
+
+def test_the_cli_says_the_warning_under_the_roll_and_the_printer(print_server, capsys):
+    s = print_server(start_paused=True)
+    from wideprint.app.cli import main
+    assert main(["printer", "roll", "load", "--media", "vinyl-300", "--length", "0.5",
+                 "--state-dir", str(s.state_dir)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "printer main: vinyl-300, width not measured yet, 0.50 m left of 0.50 m"
+    assert out[1] == ("WARNING: roll low: 0.50 m of vinyl-300 left (less than 1 m to spare): "
+                      "have a new roll ready")
+    assert main(["status", "--state-dir", str(s.state_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "printer  main: idle  [paused: started paused]\n         WARNING: roll low: 0.50 m" in out

@@ -99,6 +99,10 @@ def cmd_roll(args) -> int:
         print(json.dumps(r, indent=2))
     else:
         _show_roll(r)
+        # the printer's warning before a job runs off the roll (docs/server.md "Rolls: the warning")
+        for p in client.printers():
+            for w in p.get("warnings") or [] if p["name"] == name else []:
+                print(f"WARNING: {w['message']}")
     return EXIT_OK
 
 

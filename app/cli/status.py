@@ -31,6 +31,8 @@ def cmd_status(args) -> int:
               + (f"  [paused: {pr['reason']}]" if pr["paused"] else "")
               + (f"  job {pc['id']} {pc['name']} stroke {pc['strokes_printed']}/{pc['strokes_total']}"
                  if pc else ""))
+        for w in pr.get("warnings") or []:       # docs/server.md "Rolls: the warning"
+            print(f"         WARNING: {w['message']}")
     counts = ", ".join(f"{k} {v}" for k, v in q["counts"].items())
     print(f"queue    {'PAUSED (' + q['reason'] + ')' if q['paused'] else 'running'}; {counts}")
     pr = st.get("presets")
