@@ -666,6 +666,7 @@ class MainWindow(QMainWindow):
             self.form.show_jobs([{"settings": self.gs.job, "copies": self.gs.copies, "priority": 0}],
                                 "Settings for new jobs", editable=True)
             self.estimate.clear("Select a job to see its estimate.")
+            self.preview.set_spots(None)
             if self._shown_key is not None:
                 self.preview.show_message("Add files with “Add files…” or drop them on the window")
                 self._shown_key = None
@@ -681,6 +682,7 @@ class MainWindow(QMainWindow):
             title += " — printed or printing: settings shown, not editable"
         self.form.show_jobs(jobs, title, editable=editable)
         j = jobs[0]
+        self.preview.set_spots(j.get("spots") if len(jobs) == 1 else None)   # as its RIP resolved them
         proof = self.preview.proof.isChecked()
         key = (j["id"], repr(j.get("settings")), j["copies"], j["state"] in ("done", "failed", "cancelled"),
                proof)

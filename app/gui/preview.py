@@ -8,10 +8,11 @@ import math
 import numpy as np
 from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, Signal
 from PySide6.QtGui import QBrush, QColor, QFont, QImage, QPainter, QPainterPath, QPen, QPixmap
-from PySide6.QtWidgets import (QCheckBox, QGraphicsPathItem, QGraphicsPixmapItem, QGraphicsRectItem,
-                               QGraphicsScene,
-                               QGraphicsView, QGridLayout, QHBoxLayout,
-                               QLabel, QSizePolicy, QToolButton, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QAbstractItemView, QCheckBox, QGraphicsPathItem, QGraphicsPixmapItem,
+                               QGraphicsRectItem, QGraphicsScene,
+                               QGraphicsView, QGridLayout, QHBoxLayout, QHeaderView,
+                               QLabel, QSizePolicy, QTableWidget, QTableWidgetItem, QToolButton,
+                               QVBoxLayout, QWidget)
 
 INK_COLORS = {"C": "#00aeef", "M": "#ec008c", "Y": "#e6d200", "K": "#231f20"}
 CUT_COLOR = "#ff3d00"   # cut lines (docs/cut.md): an orange red no ink prints, never a CMYK colour
@@ -22,6 +23,114 @@ def qimage_from_rgb(rgb: np.ndarray) -> QImage:
     rgb = np.ascontiguousarray(rgb)
     h, w = rgb.shape[:2]
     return QImage(rgb.data, w, h, 3 * w, QImage.Format_RGB888).copy()
+
+
+# -- a job's spot colours (docs/spot.md "The job's report", docs/gui.md "Spot colours") ----------
+#: how each spot printed, as the operator reads it
+SPOT_RESOLVED = {"recipe": "saved recipe", "library": "library: through the media profile",
+                 "alternate": "alternate: the document's own", "cut": "cut line: not printed"}
+# CIELAB D50 -> sRGB (D65): XYZ of the D50 white, Bradford D50 -> D65, XYZ -> linear sRGB
+_D50 = np.array([0.9642, 1.0, 0.8249])
+_BRADFORD_D50_D65 = np.array([[0.9555766, -0.0230393, 0.0631636], [-0.0282895, 1.0099416, 0.0210077],
+                              [0.0122982, -0.0204830, 1.3299098]])
+_XYZ_SRGB = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                      [0.0556434, -0.2040259, 1.0572252]])
+
+
+def lab_to_srgb(lab) -> tuple[int, int, int]:
+    """A CIELAB (D50, as the spot libraries keep it) as an 8-bit sRGB swatch, clipped."""
+    L, a, b = (float(v) for v in lab)
+    fy = (L + 16) / 116
+    f = np.array([fy + a / 500, fy, fy - b / 200])
+    t = np.where(f ** 3 > 216 / 24389, f ** 3, (116 * f - 16) * 27 / 24389)
+    lin = _XYZ_SRGB @ (_BRADFORD_D50_D65 @ (t * _D50))
+    lin = np.clip(lin, 0.0, 1.0)
+    rgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+    return tuple(int(round(v * 255)) for v in rgb)       # type: ignore[return-value]
+
+
+def spot_swatch(entry: dict) -> QColor | None:
+    """The colour a spot's row shows: its library Lab (the brand's colour); a cut line in
+    the cut colour; None for a name in no library (its colour is the document's alternate)."""
+    if entry.get("resolved") == "cut":
+        return QColor(CUT_COLOR)
+    if entry.get("lab"):
+        return QColor(*lab_to_srgb(entry["lab"]))
+    return None
+
+
+class SpotList(QTableWidget):
+    """The selected job's spot colours: swatch, name, how each printed and its ΔE2000 to
+    its Lab (the job's record, docs/server.md); hidden when the job has none or is not
+    ripped yet."""
+    COLUMNS = ("", "Spot colour", "Prints as", "ΔE2000")
+
+    def __init__(self, parent=None):
+        super().__init__(0, len(self.COLUMNS), parent)
+        self.setObjectName("spot_list")
+        self.setHorizontalHeaderLabels(list(self.COLUMNS))
+        self.verticalHeader().hide()
+        self.setEditTriggers(QAbstractItemView.NoEditTriggers)
+        self.setSelectionMode(QAbstractItemView.NoSelection)
+        self.setFocusPolicy(Qt.NoFocus)
+        head = self.horizontalHeader()
+        head.setSectionResizeMode(0, QHeaderView.Fixed)
+        self.setColumnWidth(0, 28)
+        head.setSectionResizeMode(1, QHeaderView.Stretch)
+        head.setSectionResizeMode(2, QHeaderView.ResizeToContents)
+        head.setSectionResizeMode(3, QHeaderView.ResizeToContents)
+        self.spots: list[dict] = []
+        self.hide()
+
+    def set_spots(self, spots) -> None:
+        from ..safe_text import safe
+        spots = list(spots or [])
+        if spots == self.spots:
+            return
+        self.spots = spots
+        self.setRowCount(len(spots))
+        for r, e in enumerate(spots):
+            sw = QTableWidgetItem("")
+            colour = spot_swatch(e)
+            if colour is not None:
+                sw.setBackground(QBrush(colour))
+            else:
+                sw.setText("?")
+                sw.setTextAlignment(Qt.AlignmentFlag.AlignCenter)
+            de = e.get("de2000")
+            de_text = "" if de is None else f"{de:.2f}" + ("" if e.get("in_gamut") is not False
+                                                          else " (out of gamut)")
+            how = SPOT_RESOLVED.get(e.get("resolved"), e.get("resolved") or "")
+            tip = [f"{e.get('name')}: {how}"]
+            if e.get("cmyk"):
+                tip.append("recipe C {:.1f} M {:.1f} Y {:.1f} K {:.1f} %".format(
+                    *(100 * v for v in e["cmyk"])))
+            if e.get("lab"):
+                tip.append("target Lab {:.1f} {:.1f} {:.1f} (D50)".format(*e["lab"]))
+            if e.get("library"):
+                tip.append(f"library {e['library']}, media {e.get('media') or '-'}")
+            for c, text in enumerate(("", safe(e.get("name") or ""), how, de_text)):
+                item = sw if c == 0 else QTableWidgetItem(text)
+                item.setToolTip("\n".join(tip))
+                self.setItem(r, c, item)
+        rows = min(len(spots), 5)
+        self.setFixedHeight(self.horizontalHeader().height() + 2 * self.frameWidth()
+                            + sum(self.rowHeight(i) for i in range(rows)))
+        self.setVisible(bool(spots))
+
+    def rows(self) -> list[tuple]:
+        """(name, prints as, ΔE text, swatch RGB or None) per row, as shown."""
+        out = []
+        for r in range(self.rowCount()):
+            cells = [self.item(r, c) for c in range(len(self.COLUMNS))]
+            texts = [c.text() if c is not None else "" for c in cells]
+            sw = cells[0]
+            rgb = None
+            if sw is not None and texts[0] != "?":
+                colour = sw.background().color()
+                rgb = (colour.red(), colour.green(), colour.blue())
+            out.append((texts[1], texts[2], texts[3], rgb))
+        return out
 
 
 def nice_step(min_mm: float) -> float:
@@ -212,6 +321,8 @@ class PreviewPanel(QWidget):
         lay.addLayout(trow)
         lay.addLayout(bar)
         lay.addLayout(grid, 1)
+        self.spot_list = SpotList()                  # the job's spot colours, under the picture
+        lay.addWidget(self.spot_list)
 
         self.paper_item = QGraphicsRectItem()
         self.paper_item.setBrush(QBrush(QColor("#fdfdfb")))
@@ -280,6 +391,10 @@ class PreviewPanel(QWidget):
                 path.lineTo(QPointF(float(x), float(y)))
         self.cut_item.setPath(path)
         self.cut_item.setPos(QPointF(self.margin_mm, 0))
+
+    def set_spots(self, spots) -> None:
+        """The job's spot colours under its picture (its record's `spots`); None or []: none."""
+        self.spot_list.set_spots(spots)
 
     def show_message(self, text: str) -> None:
         """No picture: the empty media and a message over it (errors, hints)."""

@@ -22,7 +22,7 @@ CSV_COLUMNS = ["print_id", "job_id", "copy", "file", "source", "preset", "settin
                "drops_c", "drops_m", "drops_y", "drops_k",
                "ink_c_ml", "ink_m_ml", "ink_y_ml", "ink_k_ml", "ink_total_ml",
                "outcome", "message", "resumed", "recoveries", "retries", "attempt",
-               "printer", "media", "paper_mm"]
+               "printer", "media", "paper_mm", "spots"]
 # with costs (`report --costs`, docs/server.md "Prices and costs"): these after them
 COST_COLUMNS = ["cost_ink", "cost_media", "cost_time", "cost_total", "currency"]
 
@@ -54,5 +54,6 @@ def prints_csv(rows: list[dict], prices: dict | None = None) -> str:
                     *(f"{v:.9f}" for v in ink), f"{sum(ink):.9f}",
                     r["outcome"], r["message"], r["resumed"], r["recoveries"], r["retries"],
                     r["attempt"], r.get("printer") or "", r.get("media") or "",
-                    f"{float(r.get('paper_mm') or 0):.1f}", *more])
+                    f"{float(r.get('paper_mm') or 0):.1f}",
+                    json.dumps(r["spots"], ensure_ascii=False) if r.get("spots") else "", *more])
     return out.getvalue()

@@ -496,7 +496,7 @@ class PrintServer:
             log.warning("job %s: the archived planes of job %s not reused: %s", new["id"],
                         old["id"], exc)
             return
-        self.spool.set_ripped(new["id"], dict(info, path=str(link)))
+        self.spool.set_ripped(new["id"], dict(info, path=str(link)), old.get("spots"))
         new["ripped"] = dict(info, path=str(link))
 
     def _merged_settings(self, old: dict, raw, profile) -> dict:

@@ -81,7 +81,7 @@ def planes_job(job: dict, profile, settings, media_profile) -> PlanesJob | None:
 
 def rip_to_planes(job: dict, profile, state_dir: Path, out_dir: Path) -> dict:
     """Rip `job` once into the planes file, as the worker would rip it: {path, key, width,
-    height, dead_rows_empty, rip_s, bytes}."""
+    height, dead_rows_empty, rip_s, bytes, spots (the spot colours it resolved)}."""
     from ...rip.pipeline import RipJob
     key = planes_key(job, profile)
     out_dir.mkdir(exist_ok=True)
@@ -91,6 +91,8 @@ def rip_to_planes(job: dict, profile, state_dir: Path, out_dir: Path) -> dict:
     rs, media_profile = job_rip_settings(job["settings"], profile, state_dir)
     rip = RipJob(job["spool_path"], rs, media_profile, names=(job["name"],))
     try:
+        from ...rip.spot_render import job_spots
+        spots = job_spots(rip)
         rip.write_planes(tmp, "packed")
         dead = rip._dead_rows() is not None
         width, height = rip.width, rip.height
@@ -100,7 +102,7 @@ def rip_to_planes(job: dict, profile, state_dir: Path, out_dir: Path) -> dict:
         os.fsync(f.fileno())
     os.rename(tmp, final)
     return dict(path=str(final), key=key, width=width, height=height, dead_rows_empty=dead,
-                rip_s=round(time.monotonic() - t0, 3), bytes=final.stat().st_size)
+                rip_s=round(time.monotonic() - t0, 3), bytes=final.stat().st_size, spots=spots)
 
 
 class Ripper(threading.Thread):
@@ -149,7 +151,8 @@ class Ripper(threading.Thread):
             self.srv.spool.set_ripped(job["id"], dict(error=msg, key=planes_key(job, profile),
                                                       path=""))
             return
-        old = self.srv.spool.set_ripped(job["id"], new)
+        spots = new.pop("spots", None)        # on the job's record, with its planes
+        old = self.srv.spool.set_ripped(job["id"], new, spots)
         if old is None:                  # the job ended or moved on meanwhile: not needed
             _remove(new["path"])
             return

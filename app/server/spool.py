@@ -63,7 +63,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     force        INTEGER NOT NULL DEFAULT 0,  -- 1: the operator overrode the fit checks
     reprint_of   INTEGER,                     -- the archived job this one reprints
     rip_hold     INTEGER NOT NULL DEFAULT 0,  -- 1: RIP it while held (ripped.py)
-    ripped       TEXT                         -- JSON: its kept planes (path, key, size ...)
+    ripped       TEXT,                        -- JSON: its kept planes (path, key, size ...)
+    spots        TEXT                         -- JSON: its spot colours as ripped (docs/spot.md)
 );
 CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, interrupted, priority, id);
 CREATE TABLE IF NOT EXISTS prints (
@@ -94,7 +95,8 @@ CREATE TABLE IF NOT EXISTS prints (
     attempt        INTEGER NOT NULL DEFAULT 1,-- the job's attempt this copy belongs to
     printer        TEXT,                      -- the printer it printed on
     media          TEXT,                      -- the roll loaded on it then (rolls.py)
-    paper_mm       REAL NOT NULL DEFAULT 0    -- paper fed by the copy (taken off the roll)
+    paper_mm       REAL NOT NULL DEFAULT 0,   -- paper fed by the copy (taken off the roll)
+    spots          TEXT                       -- JSON: the job's spot colours, as printed
 );
 CREATE INDEX IF NOT EXISTS prints_job ON prints (job_id);
 CREATE TABLE IF NOT EXISTS rolls (
@@ -127,7 +129,9 @@ ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("prints", "media", "TEXT"),
                  ("prints", "paper_mm", "REAL NOT NULL DEFAULT 0"),
                  ("jobs", "rip_hold", "INTEGER NOT NULL DEFAULT 0"),
-                 ("jobs", "ripped", "TEXT"))
+                 ("jobs", "ripped", "TEXT"),
+                 ("jobs", "spots", "TEXT"),
+                 ("prints", "spots", "TEXT"))
 # columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
 # carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
 RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
@@ -164,6 +168,7 @@ def _job_dict(row: sqlite3.Row) -> dict:
     d["interrupted"] = bool(d["interrupted"])
     if d.get("ripped"):
         d["ripped"] = json.loads(d["ripped"])
+    d["spots"] = json.loads(d["spots"]) if d.get("spots") else None
     return d
 
 
@@ -531,8 +536,9 @@ class Spool:
                                "ORDER BY id").fetchall()
         return [_job_dict(r) for r in rows]
 
-    def set_ripped(self, job_id: int, info: dict) -> dict | None:
-        """A job's kept planes recorded: the ones they replace ({} if none), or None when
+    def set_ripped(self, job_id: int, info: dict, spots: list | None = None) -> dict | None:
+        """A job's kept planes recorded, with the spot colours that RIP printed (`spots`,
+        kept as they were when None): the ones they replace ({} if none), or None when
         the job is no longer waiting (the caller deletes the new planes)."""
         with self.tx() as c:
             row = c.execute("SELECT ripped FROM jobs WHERE id=? AND state IN ('queued','held')",
@@ -540,7 +546,16 @@ class Spool:
             if row is None:
                 return None
             c.execute("UPDATE jobs SET ripped=? WHERE id=?", (json.dumps(info), job_id))
+            if spots is not None:
+                c.execute("UPDATE jobs SET spots=? WHERE id=?", (json.dumps(spots), job_id))
             return json.loads(row[0]) if row[0] else {}
+
+    def set_spots(self, job_id: int, spots: list) -> None:
+        """The spot colours a job's RIP resolved (docs/spot.md "The job's report"): each
+        name, how it resolved, its recipe and ΔE2000; recorded once the worker has ripped
+        it, before its first stroke, and replaced by every later RIP of it."""
+        with self.tx() as c:
+            c.execute("UPDATE jobs SET spots=? WHERE id=?", (json.dumps(spots), job_id))
 
     def release(self, job_id: int, force: bool = False) -> dict:
         """held -> queued; force: the operator overrides the fit checks for it (a roll that
@@ -746,4 +761,7 @@ class Spool:
             rows = self.db.execute("SELECT * FROM prints ORDER BY id")
         else:
             rows = self.db.execute("SELECT * FROM prints WHERE job_id=? ORDER BY id", (job_id,))
-        return [dict(r) for r in rows]
+        out = [dict(r) for r in rows]
+        for r in out:
+            r["spots"] = json.loads(r["spots"]) if r.get("spots") else None
+        return out

@@ -627,6 +627,13 @@ class Worker(threading.Thread):
                     rip = RipJob(job["spool_path"], rs, media_profile,
                                  more=tuple(m["spool_path"] for m in members),
                                  names=(job["name"], *(m["name"] for m in members)))
+                    # its spot colours as this RIP resolved them, on the job's record
+                    # before its first stroke (docs/spot.md "The job's report")
+                    from ...rip.spot_render import job_spots
+                    spots = job_spots(rip)
+                    self._durable(lambda s=spots: self.spool.set_spots(job_id, s),
+                                  f"job {job_id}'s spot colours")
+                    job["spots"] = spots
                 layout = rip.layout.report if rip.layout is not None else None
                 if rs.placement.marks == "cut" and cp is None:     # print and cut (docs/cut.md)
                     from ...rip.cutfile import write_cut_files
@@ -906,7 +913,8 @@ class Worker(threading.Thread):
                    resumed=int(bool(resumed)), recoveries=r.get("recoveries", 0),
                    retries=r.get("retries", 0), attempt=job["attempt"], printer=self.name_,
                    media=roll["media"] if roll else None,
-                   paper_mm=self._paper_fed_mm() if rep is not None else 0.0)
+                   paper_mm=self._paper_fed_mm() if rep is not None else 0.0,
+                   spots=json.dumps(job["spots"]) if job.get("spots") else None)
         for c, d in zip(COLORS, drops):
             row[f"drops_{c}"] = d
             row[f"ink_{c}_ml"] = round(d * pl * 1e-9, 12)
