@@ -119,10 +119,13 @@ class Printer:
         from .devices import close_device, open_device
         profile = profile or self.profile
         values = np.asarray(values)
-        scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc else None)
-        img, rects = self.chart(values, values.shape[1], framed=bool(scan_dpi))
         measure_dir = self.measure_dir
         spectro = measure_dir is None
+        # the emulated scanner scans when asked, or when it is the instrument; measured
+        # outside, a scanner profile means the shop's own scanner may answer with a scan
+        scan_dpi = self.scan_dpi or (SCAN_DPI if self.scanner_icc and spectro else None)
+        outside_scan = not spectro and self.scanner_icc is not None
+        img, rects = self.chart(values, values.shape[1], framed=bool(scan_dpi) or outside_scan)
         if measure_dir is not None:
             stale = Path(measure_dir) / f"{name}.ti3"
             stale.unlink(missing_ok=True)            # the measurement of an earlier print
@@ -158,7 +161,8 @@ class Printer:
             if measure_dir is None:
                 return measure_patches(lab_path, rects, inset_mm=INSET_MM)
             return await_measurements(Path(measure_dir), name, values, img, rects,
-                                      self.dpi, self.wait_s, self.progress)
+                                      self.dpi, self.wait_s, self.progress,
+                                      scanner_icc=self.scanner_icc, bars=self.bars)
 
 
 def find_chart(scan: np.ndarray, bars: list, dpi: float) -> np.ndarray:
@@ -269,11 +273,15 @@ def scanner_profile(profile, folder: Path, patches: int = 600, seed: int = 11,
 
 def await_measurements(folder: Path, name: str, values: np.ndarray, img: np.ndarray,
                        rects: list, dpi: int, wait_s: float, progress: Progress = _quiet,
-                       poll_s: float = 1.0) -> np.ndarray:
+                       poll_s: float = 1.0, scanner_icc: Path | None = None,
+                       bars: list | None = None) -> np.ndarray:
     """A chart measured by an outside instrument: the printed chart's image NAME.tif and
     its patches NAME.ti1 (CGATS: SAMPLE_ID, device values in percent, the patch's place in
     mm) go to `folder`; then wait for NAME.ti3 (as Argyll's chartread writes it: LAB_L/A/B
-    or XYZ_X/Y/Z per SAMPLE_ID) and return Lab (n, 3) in patch order."""
+    or XYZ_X/Y/Z per SAMPLE_ID) or, with the scanner's input profile, for a scan of the
+    chart NAME-scan.tif (its resolution tag gives the dpi; the chart is found by its bars)
+    and return Lab (n, 3) in patch order (docs/media.md "A real printer, another
+    instrument")."""
     import tifffile
     from ..device_sim.spectral import xyz_to_lab
     folder.mkdir(parents=True, exist_ok=True)
@@ -292,19 +300,27 @@ def await_measurements(folder: Path, name: str, values: np.ndarray, img: np.ndar
          "END_DATA_FORMAT", "", f"NUMBER_OF_SETS {len(rows)}", "BEGIN_DATA", *rows,
          "END_DATA", ""]))
     ti3 = folder / f"{name}.ti3"
+    scans = [folder / f"{name}-scan.{ext}" for ext in ("tif", "tiff")]
     progress(f"    printed: measure {folder / name}.tif ({len(rows)} patches, "
-             f"{folder / name}.ti1) and write {ti3}")
+             f"{folder / name}.ti1) and write {ti3}"
+             + (f", or scan it whole to {scans[0]}" if scanner_icc is not None else ""))
     deadline = time.monotonic() + wait_s
-    last = None
-    while True:
-        if ti3.is_file():
-            size = ti3.stat().st_size
-            if size == last:                       # written completely
-                break
-            last = size
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"no measurement {ti3} within {wait_s:g} s")
-        time.sleep(poll_s)
+    last: dict = {}
+    found = None
+    while found is None:
+        for f in (ti3, *scans):
+            if f.is_file():
+                size = f.stat().st_size
+                if size and size == last.get(f):   # written completely
+                    found = f
+                    break
+                last[f] = size
+        if found is None:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no measurement {ti3} within {wait_s:g} s")
+            time.sleep(poll_s)
+    if found != ti3:
+        return scan_lab(found, rects, bars, scanner_icc)
     t = argyll.read_cgats(ti3)
     ids = [int(float(v)) for v in (r[t.fields.index("SAMPLE_ID")] for r in t.rows)]
     if "LAB_L" in t.fields:
@@ -317,6 +333,32 @@ def await_measurements(folder: Path, name: str, values: np.ndarray, img: np.ndar
         raise ValueError(f"{ti3}: no measurement of patch {missing[0]} "
                          f"({len(missing)} of {len(rows)} missing)")
     return np.array([by_id[i] for i in range(1, len(rows) + 1)])
+
+
+def scan_lab(path: Path, rects: list, bars: list | None, scanner_icc: Path | None) -> np.ndarray:
+    """Lab (n, 3) of a chart's patches read from a scanner's TIFF (8 or 16 bits RGB, its
+    resolution in the file) through the scanner's input profile; ValueError naming the
+    file for what cannot be read."""
+    import tifffile
+    if scanner_icc is None:
+        raise ValueError(f"{path}: a scan needs the scanner's input profile (--scanner-icc)")
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        res, unit = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
+        samples, dtype = page.samplesperpixel, page.dtype
+    unit = int(unit.value) if unit is not None else 2          # TIFF: inch unless said
+    dpi = res.value[0] / res.value[1] * (2.54 if unit == 3 else 1.0) if res and unit != 1 else 0
+    if not 50 <= dpi <= 9600:           # unit 1 (none), tifffile's default, is no dpi either
+        raise ValueError(f"{path}: the scan says no resolution; save it with its dpi")
+    if samples < 3 or dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: expected an RGB scan of 8 or 16 bits, not {samples} "
+                         f"channel(s) of {dtype}")
+    full = 65535.0 if dtype == np.uint16 else 255.0
+    try:
+        rgb = scan_patches(str(path), rects, dpi, bars)[:, :3] / full
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return xicclu(scanner_icc, rgb, "f")[:, :3]
 
 
 def pct_to_level(pct) -> np.ndarray:

@@ -197,6 +197,9 @@ SLOW: dict[str, set[str] | str] = {
         "test_charts_measured_outside_wideprint_are_waited_for",  # 2.3
         "test_a_media_made_from_scans_is_within_2_5",  # 240
     },
+    "test_media_outside_scan.py": {
+        "test_a_chart_scanned_by_the_shop_reads_as_the_emulated_scanner",  # 345 (the loop)
+    },
     "test_load.py": {
         "test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libvips",  # 0.7
         "test_memory_bounded_for_tall_image",  # 8.2
