@@ -63,7 +63,7 @@ def _check_scan(args) -> None:
 
 
 def _emulator_options(args) -> dict:
-    opts = {}
+    opts: dict = {}
     if getattr(args, "vcd", None):
         try:
             window = tuple(int(v) for v in args.vcd_window.split(":"))

@@ -4,10 +4,14 @@ calibration scans), and the thesis' test line."""
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING, Any, cast
 
 from .common import (EXIT_DEVICE, EXIT_JOB_FAILED, EXIT_OK, EXIT_USAGE, _check_scan,
                      _close_device, _emulator_job_options, _emulator_options, _profile,
                      _scan_options)
+
+if TYPE_CHECKING:
+    from ...rip.pipeline import RipJob
 
 
 def cmd_test_print(args) -> int:
@@ -44,15 +48,17 @@ def cmd_test_print(args) -> int:
         print(f"wideprint test-print: {exc}", file=sys.stderr)
         return EXIT_DEVICE
     try:
-        rep = PrintJob(dev, job, speed_mm_s=args.speed).run()
+        # a PatternJob has the RipJob interface the driver uses (rip/testprints.py)
+        rep = PrintJob(dev, cast("RipJob", job), speed_mm_s=args.speed).run()
         if args.preview and args.media_out:
             from ...rip.planes import write_preview
             write_preview(args.media_out, args.preview)
         print(f"{args.pattern}: printed {rep.strokes_printed} strokes, {job.width} x {job.height} dots"
               + (f" -> {args.media_out}" if args.media_out else "")
               + (f", scan {args.scan_out}" if args.scan_out else ""))
-        if args.thesis and dev.emulator is not None:
-            for e in (e for e in dev.emulator.events if e.get("event") == "line"):
+        emu: Any = dev.emulator                 # the in-process emulator, or None
+        if args.thesis and emu is not None:
+            for e in (e for e in emu.events if e.get("event") == "line"):
                 print(f"thesis line, stroke {e['stroke']}: servo every {e['servo_period_s'] * 1e3:g} ms; "
                       f"max following error {e['max_following_error']:.2f} counts, final "
                       f"position error {e['final_error']:+.2f} counts, peak current "
