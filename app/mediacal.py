@@ -343,7 +343,7 @@ def scan_lab(path: Path, rects: list, bars: list | None, scanner_icc: Path | Non
     if scanner_icc is None:
         raise ValueError(f"{path}: a scan needs the scanner's input profile (--scanner-icc)")
     with tifffile.TiffFile(path) as tif:
-        page = tif.pages[0]
+        page = tif.pages.first
         res, unit = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
         samples, dtype = page.samplesperpixel, page.dtype
     unit = int(unit.value) if unit is not None else 2          # TIFF: inch unless said
