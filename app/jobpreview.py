@@ -44,6 +44,7 @@ class PreviewData:
     seconds: float = 0.0
     warnings: list = field(default_factory=list)
     out_of_gamut: float | None = None     # share of the image the media cannot print (softproof.py)
+    spots: list = field(default_factory=list)   # a document's spot colours as resolved (docs/spot.md)
 
 
 def _vips_reduce(src: ImageSource, tw: int, th: int) -> np.ndarray | None:
@@ -136,6 +137,8 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
     t0 = time.monotonic()
     job = RipJob(path, rs, profile)
     try:
+        from ..rip.spot_render import job_spots
+        spots = job_spots(job)
         W, H = job.width, job.height
         planner = job.planner()
         total = planner.total_strokes
@@ -186,7 +189,7 @@ def compute_preview(path: str, rs, profile, copies: int = 1, max_px: int = PREVI
                            height_mm=height_mm, dpi=rs.dpi, total_strokes=total, dots=dots,
                            estimate=est, source_desc=desc, exact=exact,
                            seconds=time.monotonic() - t0, warnings=warnings,
-                           out_of_gamut=gamut)
+                           out_of_gamut=gamut, spots=spots)
     finally:
         job.close()
 

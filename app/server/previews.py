@@ -75,6 +75,9 @@ class Previews:
             self._cache[key] = pd
             while len(self._cache) > CACHE_ENTRIES:
                 self._cache.popitem(last=False)
+        # the estimate resolved the document's spot colours as its RIP will: on the record of
+        # a job still waiting (its RIP's own list replaces them; docs/spot.md)
+        self.srv.spool.set_spots(job["id"], pd.spots, waiting_only=True)
         if px == THUMB_PX and not self.thumbnail_path(job["id"]).exists():
             try:
                 self._write_png(self.thumbnail_path(job["id"]), pd)
@@ -140,7 +143,7 @@ class Previews:
                     width_mm=pd.width_mm, height_mm=pd.height_mm, dpi=pd.dpi,
                     strokes=pd.total_strokes, stroke_s=e.stroke_s, source=pd.source_desc,
                     exact=pd.exact, warnings=list(pd.warnings), copies=copies,
-                    out_of_gamut=pd.out_of_gamut,
+                    out_of_gamut=pd.out_of_gamut, spots=pd.spots,
                     per_copy=per_copy, all_copies=all_copies,
                     preview_px=[int(pd.dots.shape[1]), int(pd.dots.shape[0])])
 

@@ -550,12 +550,15 @@ class Spool:
                 c.execute("UPDATE jobs SET spots=? WHERE id=?", (json.dumps(spots), job_id))
             return json.loads(row[0]) if row[0] else {}
 
-    def set_spots(self, job_id: int, spots: list) -> None:
+    def set_spots(self, job_id: int, spots: list, waiting_only: bool = False) -> None:
         """The spot colours a job's RIP resolved (docs/spot.md "The job's report"): each
         name, how it resolved, its recipe and ΔE2000; recorded once the worker has ripped
-        it, before its first stroke, and replaced by every later RIP of it."""
+        it, before its first stroke, and replaced by every later RIP of it.  waiting_only:
+        the estimate's, kept only while the job waits (queued or held)."""
         with self.tx() as c:
-            c.execute("UPDATE jobs SET spots=? WHERE id=?", (json.dumps(spots), job_id))
+            c.execute("UPDATE jobs SET spots=? WHERE id=?" + (" AND state IN ('queued','held')"
+                                                              if waiting_only else ""),
+                      (json.dumps(spots), job_id))
 
     def release(self, job_id: int, force: bool = False) -> dict:
         """held -> queued; force: the operator overrides the fit checks for it (a roll that
