@@ -41,7 +41,8 @@ def exercise() -> None:
     from . import api
     from .warmup import warm
     warm(verbose=False)
-    from ..rip import deadrows, load, planes, rtl  # noqa: F401  (their kernels)
+    from ..rip import deadrows, planes, rtl  # noqa: F401  (their kernels)
+    from ..rip.load import bmp
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory(prefix="wideprint-aot-") as d:
         images = []
@@ -86,9 +87,9 @@ def exercise() -> None:
     # paths no small generated file reaches cheaply: called as their callers call them
     for mode in (0, 1, 2, 3):
         rtl._decode_row(mode, np.frombuffer(b"\x00\x00", np.uint8), np.zeros(8, np.uint8))
-    load._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 4, 1, False, 2,
+    bmp._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 4, 1, False, 2,
                      np.zeros((1, 4), np.uint8), np.zeros(4, np.int64))
-    load._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 8, 1, True, 2,
+    bmp._rle_decode(np.frombuffer(b"\x00\x01", np.uint8), 4, 8, 1, True, 2,
                      np.zeros((1, 4), np.uint8), np.zeros(4, np.int64))
     rows = np.zeros((16, 8, 4), np.uint8)
     deadrows._give_away(rows, np.array([1], np.int64), 0, 4, 0)

@@ -51,6 +51,14 @@ def kernel(inline: str | None = None, variant: str | None = None) -> Callable[[C
     return wrap
 
 
+def compiled_package(module: str) -> str:
+    """The package whose compiled module holds a kernel of `module`: the top-level one
+    (wideprint.rip for wideprint.rip.load.bmp too), so a package split into sub-packages
+    (rip/load/, rip/color/) still builds one module and one manifest."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if len(parts) > 2 else module.rpartition(".")[0]
+
+
 def _jit_only() -> bool:
     return os.environ.get("WIDEPRINT_KERNELS", "") == "jit"
 
@@ -61,7 +69,7 @@ class Kernel:
         self.__wrapped__ = fn
         self.__doc__ = fn.__doc__
         self.name = f"{fn.__module__}.{fn.__qualname__}" + (f"[{variant}]" if variant else "")
-        self.package = fn.__module__.rpartition(".")[0]
+        self.package = compiled_package(fn.__module__)
         self.inline = inline
         self._table = None          # argument keys -> compiled function, loaded on first call
         self._dispatcher = None     # numba's, made on the first call the table cannot take
@@ -133,10 +141,11 @@ _PACKAGES: dict[str, dict] = {}     # package -> {kernel name: {arg keys: functi
 
 
 def sources_digest(package_dir: Path) -> str:
-    """The digest of a package's Python sources a compiled module was built from."""
+    """The digest of a package's Python sources a compiled module was built from, its
+    sub-packages' included (each file named by its path in the package)."""
     h = hashlib.sha256()
-    for p in sorted(package_dir.glob("*.py")):
-        h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")
+    for p in sorted(package_dir.rglob("*.py"), key=lambda p: p.relative_to(package_dir).as_posix()):
+        h.update(p.relative_to(package_dir).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
     h.update(np.__version__.encode())
     return h.hexdigest()
 
@@ -152,7 +161,7 @@ def _load_package(package: str) -> dict:
     when there is none, it cannot be loaded, or it was built from other sources."""
     if _jit_only():
         return {}
-    pkg_dir = Path(sys.modules[package].__file__).parent
+    pkg_dir = Path(sys.modules[package].__file__ or "").parent
     try:
         manifest = json.loads((pkg_dir / MANIFEST).read_text())
     except (OSError, ValueError):

@@ -8,7 +8,7 @@
 * HP-GL/2 RTL (first escape sequence ESC E, ESC%-12345X, ESC*, ESC&, ESC%): our own
   decoder (rip/rtl.py; docs/rtl.md); 1-bit raster prints dot for dot, contone raster
   goes through the normal RIP;
-* anything else: rip/load.py's image loaders (TIFF, JPEG, PNG, BMP), placed by
+* anything else: rip/load/'s image loaders (TIFF, JPEG, PNG, BMP), placed by
   rip/place.py.
 
 The result has the ImageSource duck type (docs/placement.md), already on the device grid.

@@ -36,7 +36,9 @@ from typing import Iterator
 
 import numpy as np
 
-from .load import ImageError, ImageSource, _reband, fetch_rows  # noqa: F401 (_reband: document, layout)
+from .load import ImageError, ImageSource
+from .load.source import _reband  # noqa: F401 (_reband: document, layout)
+from .load.vips import fetch_rows
 # the Placement settings object is declared with the settings schema (rip/settings.py)
 from .settings import (DEFAULT_PPI, FILTERS, MAX_SIDE, MM_PER_INCH, ROTATIONS,  # noqa: F401
                        Placement)
@@ -343,7 +345,7 @@ class PlacedSource:
 
 
 def _vips_problem(fmt: str, msg: str, path: str) -> str:
-    from .load import _vips_problem as problem
+    from .load.vips import _vips_problem as problem
 
     return problem(fmt, msg, path)
 

@@ -160,7 +160,7 @@ def test_rip_imports_no_driver_no_emulator_no_app():
 
 def test_no_payload_struct_format_outside_the_protocol_module():
     """Wire payload layouts are declared once (driver/protocol.py); nothing else packs
-    them.  (File formats, e.g. BMP headers in rip/load.py, are not payloads.)"""
+    them.  (File formats, e.g. BMP headers in rip/load/bmp.py, are not payloads.)"""
     offenders = []
     for name, path in MODULES.items():
         if name == "wideprint.driver.protocol" or \

@@ -671,7 +671,7 @@ def test_fuzzed_files_never_crash(tmp_path):
 
 
 # --------------------------------------------------------------------------
-# plain strip TIFFs: read strip by strip (rip/load.py _StripReader), not through libvips
+# plain strip TIFFs: read strip by strip (rip/load/tiff.py _StripReader), not through libvips
 # --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
@@ -680,7 +680,8 @@ def test_fuzzed_files_never_crash(tmp_path):
                                                    ("lzw", False), ("lzw", True), ("packbits", False)])
 def test_strip_tiffs_read_the_samples_libvips_reads(tmp_path, dtype, channels, photometric,
                                                     compression, predictor):
-    from wideprint.rip.load import _StripReader, _VipsReader
+    from wideprint.rip.load.tiff import _StripReader
+    from wideprint.rip.load.vips import _VipsReader
     rng = np.random.default_rng(channels * 7 + np.dtype(dtype).itemsize)
     for i, (h, w, rps) in enumerate(((61, 47, 7), (5, 3, 1), (40, 33, 1000))):
         a = rng.integers(0, np.iinfo(dtype).max + 1, (h, w, channels)[:3 if channels > 1 else 2],
@@ -737,7 +738,8 @@ def test_strip_tiff_band_memory_does_not_grow_with_the_strips_read(tmp_path):
 def test_one_strip_tiffs_uncompressed_by_rows_compressed_over_16_mb_through_libvips(tmp_path):
     """A whole image in one strip (some RIPs write them): uncompressed, it is still read a
     few rows at a time; compressed, it would be decoded whole, so it stays with libvips."""
-    from wideprint.rip.load import _StripReader, _VipsReader
+    from wideprint.rip.load.tiff import _StripReader
+    from wideprint.rip.load.vips import _VipsReader
     a = np.random.default_rng(3).integers(0, 256, (800, 9000, 3), dtype=np.uint8)   # 21.6 MB
     for compression, reader in ((None, _StripReader), ("zlib", _VipsReader)):
         path = tmp_path / f"one_{compression}.tif"
