@@ -59,6 +59,7 @@ class GuiSettings:
     splitter: str = ""
     calibration: dict = field(default_factory=dict)  # last pattern, dpi, width
     add_held: bool = False                           # Add files: as held (look, then Release)
+    preset: str = ""                                 # Add files: the server's preset ("": none)
 
     @classmethod
     def load(cls, path: Path) -> "GuiSettings":

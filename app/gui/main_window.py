@@ -10,6 +10,7 @@ change)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import uuid
 from pathlib import Path
@@ -33,7 +34,8 @@ from .preview import PreviewPanel
 from .printers_panel import PrintersPanel
 from .server_link import ServerLink
 from .wheel_guard import guard_wheel
-from .settings_form import JOB_FIELDS_KEYS, SettingsForm, apply_edit, effective, settings_patch
+from .settings_form import (JOB_FIELDS_KEYS, SettingsForm, apply_edit, effective, overrides,
+                            settings_patch)
 
 log = logging.getLogger("wideprint.gui")
 
@@ -349,6 +351,18 @@ class MainWindow(QMainWindow):
         self.target.setToolTip("The printer new jobs go to (any: the first free one that fits)")
         self.target.addItem("any printer", None)
         tb.addWidget(self.target)
+        # a preset of the server's (GET /v1/presets) for new jobs: its settings become the
+        # settings for new jobs, its "hold" default the "as held" box (docs/gui.md "Presets")
+        tb.addWidget(QLabel(" preset "))
+        self.add_preset = QComboBox()
+        self.add_preset.setObjectName("add_preset")
+        self.add_preset.setToolTip("The server's preset new jobs are added with: its settings, "
+                                   "and whether its jobs are added held (remembered)")
+        self.add_preset.addItem("none", None)
+        self.add_preset.activated.connect(self._preset_chosen)
+        tb.addWidget(self.add_preset)
+        self.presets: dict = {}                    # the server's presets: name -> settings
+        self.presets_held: set = set()             # the presets whose jobs are added held
         self.add_held = QCheckBox("as held")
         self.add_held.setObjectName("add_held")
         self.add_held.setToolTip("New jobs wait, held, until released: look at the preview and "
@@ -464,6 +478,7 @@ class MainWindow(QMainWindow):
         self.status_conn.setText(f"print server {c.host}:{c.port}" if up else "print server: not connected")
         if up:
             self.refresh_history()
+            self.refresh_presets()
         elif why:
             log.warning("%s", why)
 
@@ -811,6 +826,50 @@ class MainWindow(QMainWindow):
             self.gs.last_dir = str(Path(paths[0]).parent)
             self.add_files(paths)
 
+    def refresh_presets(self) -> None:
+        """The server's presets, read again (GET /v1/presets: the file as it is now)."""
+        self.link.call(lambda c: c.presets(), self._presets_read, lambda msg: None)
+
+    def _presets_read(self, info: dict) -> None:
+        self.presets = dict(info.get("presets") or {})
+        self.presets_held = set(info.get("held") or ())
+        names = sorted(self.presets)
+        if [self.add_preset.itemData(i) for i in range(1, self.add_preset.count())] != names:
+            self.add_preset.blockSignals(True)
+            self.add_preset.clear()
+            self.add_preset.addItem("none", None)
+            for n in names:
+                self.add_preset.addItem(n + (" (held)" if n in self.presets_held else ""), n)
+            self.add_preset.blockSignals(False)
+        i = self.add_preset.findData(self.gs.preset or None)
+        self.add_preset.setCurrentIndex(max(0, i))
+        if i < 0 and self.gs.preset:                # gone from the server's file
+            log.warning("preset %s: no longer one of the server's presets; new jobs: none",
+                        self.gs.preset)
+            self.gs.preset = ""
+            self._save_timer.start()
+
+    def choose_preset(self, name: str | None) -> None:
+        """New jobs with the server's preset `name` (None: none): the settings for new jobs
+        become its settings, and "as held" its default."""
+        i = self.add_preset.findData(name)
+        if i < 0:
+            raise KeyError(name)
+        self.add_preset.setCurrentIndex(i)
+        self._preset_chosen(i)
+
+    def _preset_chosen(self, index: int) -> None:
+        name = self.add_preset.itemData(index)
+        self.gs.preset = name or ""
+        if name is not None:
+            self.gs.job = json.loads(json.dumps(self.presets.get(name) or {}))
+        held = name in self.presets_held
+        self.add_held.setChecked(held)
+        log.info("new jobs: preset %s%s", name or "none", " (added held)" if held else "")
+        self._save_timer.start()
+        if not self.selected_jobs():
+            self._show_selection()
+
     def _add_held_toggled(self, on: bool) -> None:
         self.gs.add_held = bool(on)
         self._save_timer.start()
@@ -827,8 +886,14 @@ class MainWindow(QMainWindow):
             return
         printer = self.target.currentData()
         held = self.add_held.isChecked()
-        descs = [dict(settings=dict(self.gs.job), copies=self.gs.copies, printer=printer,
-                      hold=True if held else None, client="gui", key=f"gui-{uuid.uuid4()}")
+        preset = self.add_preset.currentData()
+        # with a preset: the preset's name and only what the operator changed of its
+        # settings; "as held" said either way (the box follows the preset's default)
+        settings = overrides(self.presets.get(preset) or {}, self.gs.job) if preset else \
+            dict(self.gs.job)
+        descs = [dict(settings=settings or None, copies=self.gs.copies, printer=printer,
+                      preset=preset, hold=held if preset else (True if held else None),
+                      client="gui", key=f"gui-{uuid.uuid4()}")
                  for _ in files]
 
         def upload(c):
@@ -848,7 +913,8 @@ class MainWindow(QMainWindow):
                     self.statusBar().showMessage(f"{f.name}: {short_paths(err)}", 15000)
                     continue
                 ids.append(job["id"])
-                log.info("job %s: %s queued%s%s", job["id"], f.name, " held" if held else "",
+                log.info("job %s: %s queued%s%s%s", job["id"], f.name, " held" if held else "",
+                         f" with preset {preset}" if preset else "",
                          f" for printer {printer}" if printer else "")
             self._select_new = set(ids)
             self._select_added()

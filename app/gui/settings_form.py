@@ -292,3 +292,16 @@ def settings_patch(key: str, value) -> dict:
     if key.startswith("placement."):
         return {"settings": {"placement": {key.split(".", 1)[1]: value}}}
     return {"settings": {key: value}}
+
+
+def overrides(base: dict, mine: dict) -> dict:
+    """The settings of `mine` that differ from a preset's `base` (placement field by field):
+    what a job added with that preset sends as its own, so the preset's settings stay the
+    server's (a preset changed in its file later applies to what the operator did not
+    change).  docs/gui.md "Presets"."""
+    out = {k: v for k, v in mine.items() if k != "placement" and base.get(k) != v}
+    place, base_place = mine.get("placement") or {}, base.get("placement") or {}
+    diff = {k: v for k, v in place.items() if base_place.get(k) != v}
+    if diff:
+        out["placement"] = diff
+    return out
