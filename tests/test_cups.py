@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from support.images import ROOT, random_planes, write_cmyk_tiff
-from private_cups import private_cupsd
+from support.private_cups import private_cupsd
 from support.cups import conversions_from
 from wideprint.app.client import Client
 from wideprint.rip.planes import read_planes

@@ -64,7 +64,7 @@ def test_the_cups_backend_cancels_a_job_wider_than_the_paper(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_an_ipp_print_job_wider_than_the_paper_ends_aborted_naming_it(tmp_path):
-    from private_cups import IppServe
+    from support.private_cups import IppServe
     from test_ipp import BINARY, print_job, wait_ipp_job
     if BINARY is None:
         pytest.fail("the Printer Application is not built (make app/ipp/wideprint-ipp)")

@@ -20,7 +20,7 @@ import pytest
 import tifffile
 
 from support.images import random_planes, write_cmyk_tiff
-from private_cups import IppServe, assert_bit_exact, free_port, wait_job
+from support.private_cups import IppServe, assert_bit_exact, free_port, wait_job
 from wideprint.app.api import rip
 from wideprint.app.ipp.bridge import find_binary
 from wideprint.rip.planes import read_planes

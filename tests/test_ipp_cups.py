@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from support.images import ROOT, random_planes, write_cmyk_tiff
-from private_cups import IppServe, assert_bit_exact, private_cupsd, sha256, wait_job
+from support.private_cups import IppServe, assert_bit_exact, private_cupsd, sha256, wait_job
 from support.cups import conversions_from
 from wideprint.app.ipp.bridge import find_binary
 

@@ -2,7 +2,7 @@
 any machine of the network the way CUPS, macOS, Windows and phones find printers, and print
 from what they find.
 
-The test runs itself again inside private namespaces (tests/private_mdns.py): an avahi-daemon
+The test runs itself again inside private namespaces (tests/support/private_mdns.py): an avahi-daemon
 on a private veth interface, so nothing is announced on the machine's network. There it
 starts `wideprint serve --ipp` on the network (`--ipp-listen '*'`) with two printers, browses
 with avahi and with CUPS' own `ippfind`, checks what IPP Everywhere clients read from the
@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests import private_mdns
-from tests.private_cups import IppServe, assert_bit_exact, wait_job
+from tests.support import private_mdns
+from tests.support.private_cups import IppServe, assert_bit_exact, wait_job
 
 FORMATS = {"image/jpeg", "image/png", "image/tiff", "application/pdf", "image/pwg-raster",
            "image/urf"}

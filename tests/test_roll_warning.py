@@ -108,7 +108,7 @@ def test_the_printer_card_shows_the_warning_in_amber_and_a_fault_first(qtbot):
 
 @pytest.mark.timeout(300)
 def test_ipp_says_media_low_as_a_warning_the_printer_goes_on(tmp_path):
-    from private_cups import IppServe
+    from support.private_cups import IppServe
     from test_ipp import IPPTOOL_DIR, BINARY, attrs, ipptool
     if BINARY is None:
         pytest.fail("the Printer Application is not built (make app/ipp/wideprint-ipp)")

@@ -1,5 +1,5 @@
 """HP RTL input (docs/rtl.md): files written by the test suite's own encoder
-(tests/rtl_encode.py) in every compression mode and both colour configurations decode to
+(tests/support/rtl_encode.py) in every compression mode and both colour configurations decode to
 exactly their bitmaps, print bit-exact on the emulator, contone RTL goes through the
 normal RIP, and malformed files fail with the byte offset."""
 
@@ -14,7 +14,7 @@ import pytest
 
 import corpus
 from support.images import DEVICE_PPI, random_planes
-from rtl_encode import CONFIGS, ESC, encode_bits, encode_contone, expected_dots
+from support.rtl_encode import CONFIGS, ESC, encode_bits, encode_contone, expected_dots
 from wideprint.rip.inputs import sniff_input
 from wideprint.rip.load import ImageError
 from wideprint.rip.pipeline import RipJob, RipSettings

@@ -255,7 +255,7 @@ def test_rtl_in_a_hot_folder_and_a_hostile_postscript_job(srv, client, tmp_path)
     dots bit-exact; a PostScript program that reads files fails its own job with
     Ghostscript's reason, and the queue goes on."""
     import shutil
-    from rtl_encode import encode_bits
+    from support.rtl_encode import encode_bits
     planes = random_planes(50, 120, seed=21)
     folder = srv.root / "hot" / "banner"
     (tmp_path / "plot.rtl").write_bytes(encode_bits(planes, "simple-kcmy", 2))

@@ -8,4 +8,6 @@ Nothing here is part of the wideprint package.
 - gui: the GUI tests' server and window
 - background: long single-threaded computations run at the lowest priority
 - marks: which tests are slow, system or gui
-- cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree"""
+- cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree
+- private_cups, private_mdns: a private cupsd and `serve --ipp`; avahi in private namespaces
+- rtl_encode: an HP RTL writer of the tests' own, independent of rip/rtl.py"""

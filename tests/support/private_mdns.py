@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 AVAHI = REPO / "build" / "avahi"
 AVAHI_DAEMON = AVAHI / "usr" / "sbin" / "avahi-daemon"
 AVAHI_BROWSE = AVAHI / "usr" / "bin" / "avahi-browse"
