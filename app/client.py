@@ -3,9 +3,9 @@ server (STATE/server.json or $WIDEPRINT_URL) and a token (`find_token`), says wh
 for, and maps the API's endpoints to methods; `ApiError` is every refusal and every server
 that cannot be reached.
 
-Its users - the commands (app/server_cli.py), the GUI (app/gui/server_link.py), the IPP
-bridge (app/ipp/bridge.py), the pytest plugin - import it from here; app/server_cli.py
-re-exports the names.  Light: the standard library only, http.client loaded on the first
+Its users - the commands (app/cli/: serve, submit, queue, ... through app/cli/remote.py),
+the GUI (app/gui/server_link.py), the IPP bridge (app/ipp/bridge.py), the pytest plugin -
+import it from here.  Light: the standard library only, http.client loaded on the first
 request, so building the command line stays quick."""
 
 from __future__ import annotations

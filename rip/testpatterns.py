@@ -4,7 +4,7 @@ KIND` measures from a scan (docs/calibration.md).  Light - no numpy, no kernels 
 command line's parsers and the GUI's lists are built from it; the patterns themselves are
 drawn by rip/testprints.py, measured by app/calibrate.py.
 
-One registry both sides read, so neither the command's options (app/calibrate_cli.py) nor
+One registry both sides read, so neither the command's options (app/cli/calibrate.py) nor
 the measuring (app/calibrate.py) imports the other (tests/test_layers.py: no circles)."""
 
 from __future__ import annotations

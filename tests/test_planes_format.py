@@ -115,7 +115,7 @@ def test_rip_writes_the_same_dots_in_either_encoding(tmp_path, capsys, dither):
                          "--size", "pixels", "--planes-format", fmt]) == 0
         said[fmt] = capsys.readouterr().out.split("drops")[1]
         # main() called in a process of the caller's leaves its garbage collector alone
-        # (only the `wideprint` command's own process starts with it off: app/cli.py)
+        # (only the `wideprint` command's own process starts with it off: app/cli/process.py)
         assert gc.isenabled() and gc.get_freeze_count() == frozen
     assert planes_format(tmp_path / "packed.tif") == "packed"
     assert said["8bit"] == said["packed"]

@@ -11,7 +11,7 @@ import sys
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
-    """The GUI's options, for `wideprint gui` (app/cli.py) and `python -m` alike."""
+    """The GUI's options, for `wideprint gui` (app/cli/gui.py) and `python -m` alike."""
     ap.add_argument("files", nargs="*", metavar="FILE", help="files (or folders) to send to the queue")
     ap.add_argument("--state-dir", metavar="DIR",
                     help="the print server's state directory (default: $WIDEPRINT_STATE_DIR, "

@@ -12,7 +12,7 @@ protocol of docs/ipp.md ("The bridge protocol") on its stdin/stdout:
   followed job's state as `job` lines, whenever they change (polled 4 times a second);
 - a `cancel` line cancels the wideprint job.
 
-`wideprint serve --ipp` starts one beside the server (app/server_cli.py).
+`wideprint serve --ipp` starts one beside the server (app/cli/serve.py).
 """
 
 from __future__ import annotations
