@@ -92,3 +92,22 @@ def test_new_jobs_take_the_chosen_presets_settings_and_hold_default(qtbot, serve
                         timeout=5_000)
     finally:
         win.link.stop()
+
+
+def test_the_roll_warning_goes_into_the_log_once(qtbot, server, tmp_path, caplog):
+    """(beside the presets: the window's other issue-34 addition) the printer card's warning
+    is logged when it comes, not again as the metres go down."""
+    import logging
+    caplog.set_level(logging.INFO, logger="wideprint.gui")
+    win = open_window(qtbot, server, tmp_path / "cfg")
+    try:
+        server.client.roll("main", {"media": "vinyl-300", "length_m": 0.5})
+        card = win.printers_panel.cards["main"]
+        qtbot.waitUntil(lambda: card.fault.text().startswith("Warning: roll low"), timeout=20_000)
+        server.client.roll("main", {"remaining_m": 0.4})
+        qtbot.waitUntil(lambda: "0.40 m" in card.fault.text(), timeout=20_000)
+        said = [r.getMessage() for r in caplog.records if "roll low" in r.getMessage()]
+        assert said == ["printer main: roll low: 0.50 m of vinyl-300 left (less than 1 m to "
+                        "spare): have a new roll ready"], said
+    finally:
+        win.link.stop()

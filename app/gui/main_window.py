@@ -239,6 +239,7 @@ class MainWindow(QMainWindow):
         self.calibration = None
 
         self._faults: dict[str, str] = {}          # printer -> its fault, as logged
+        self._warned: dict[str, str] = {}          # printer -> its warnings, as logged
         self._fitted = False
         self._undo: list[tuple] = []                # (key, [(job id, its own value)], text)
         self._select_new: set[int] = set()          # jobs just added: selected when they show
@@ -528,6 +529,14 @@ class MainWindow(QMainWindow):
                             f" — {advice}" if advice else "")
             else:
                 log.info("printer %s: fault cleared", name)
+        for p in printers:       # the server's warnings (a roll running low): when one
+            name = p["name"]     # comes or names another job, not as the metres go down
+            ws = p.get("warnings") or []
+            key = repr([(w.get("kind"), w.get("job")) for w in ws])
+            if key != self._warned.get(name, "[]"):
+                self._warned[name] = key
+                for w in ws:
+                    log.warning("printer %s: %s", name, safe(w.get("message", "")))
 
     def _printers_changed(self, printers: list) -> None:
         self.printers = printers
