@@ -483,7 +483,7 @@ def _icc_space(path: str) -> bytes:
 
 
 def colour_args(input_icc: str | None, output_icc: str | None, intent: str) -> list[str]:
-    """The same conversions as rip/color.py's Separator, done by Ghostscript:
+    """The same conversions as rip/color/'s Separator, done by Ghostscript:
 
     * RGB content: input_icc (an RGB profile) else built-in sRGB -> output_icc else the
       built-in CMYK profile, with the job's intent and no black point compensation;

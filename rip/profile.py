@@ -30,7 +30,7 @@ import tomlkit
 RESOURCES = Path(__file__).resolve().parent.parent / "resources"
 DEFAULT_PROFILE = RESOURCES / "printers" / "default.toml"
 COLORS = ("C", "M", "Y", "K")
-INTENTS = ("perceptual", "relative", "saturation", "absolute")   # as rip/color.py
+INTENTS = ("perceptual", "relative", "saturation", "absolute")   # as rip/color/
 FPGA_HEAD_CHANNELS = 8
 WORDS_PER_FIRE = 8            # 128 nozzle bits in 16-bit FIFO words
 FINE_STEPS = 64               # fine steps per column of the bidir offset (docs/calibration.md)

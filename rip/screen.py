@@ -2,7 +2,7 @@
 
 With an ordered method a pixel's drops depend only on its own ink and the threshold mask,
 so the RIP need not make a band's CMYK and 0/1 planes at all.  Row by row, the kernel
-separates into a scratch row that stays in cache (rip/color.py's LUT kernel, then ink limit
+separates into a scratch row that stays in cache (rip/color/kernels.py's LUT kernel, then ink limit
 and curves), compares it with the mask's threshold row and writes packed bits straight in
 the stroke planner's window layout: ``(rows, 4, ceil(width / 8))``, x = 0 in bit 7 of byte 0
 (``np.packbits`` order).  The bits are exactly ``Halftoner.process(Separator.convert(band))``
@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 from .compiled import kernel
 
-from .color import Separator, _lut3_rows, _post_rows
+from .color import Separator
+from .color.kernels import _lut3_rows, _post_rows
 from .halftone import ORDERED, Halftoner
 from .parallel import run_parallel, split
 

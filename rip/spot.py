@@ -34,7 +34,7 @@ __all__ = ["Spot", "Library", "Resolved", "SpotBook", "library_dir", "fold", "pa
 
 #: above this ΔE2000 between the target and its profile round trip, a colour is out of gamut
 GAMUT_DE = 1.0
-#: the shipped default media (app/medialib.py DEFAULT_MEDIA): its profile is rip/color.py's
+#: the shipped default media (app/medialib.py DEFAULT_MEDIA): its profile is rip/color/icc.py's
 DEFAULT_MEDIA = "vinyl-300"
 CXF_NS = "http://colorexchangeformat.com/CxF3-core"
 LIB_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")

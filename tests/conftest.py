@@ -4,7 +4,7 @@ from pathlib import Path
 
 # Qt must never look for a display in the test run (PySide6 aborts without one).
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-# the run's own cache (rip/color.py's LUTs): nothing read from or left in the user's ~/.cache
+# the run's own cache (rip/color/lutcache.py's LUTs): nothing read from or left in the user's ~/.cache
 if "WIDEPRINT_CACHE_DIR" not in os.environ:
     import atexit
     import shutil

@@ -338,12 +338,13 @@ def test_throughput_and_threads(capsys):
 
 
 def test_lut_cache_reads_back_the_same_lut_and_keys_on_what_makes_it(profiles, tmp_path, monkeypatch):
-    """rip/color.py keeps each transform's 3-D LUT between processes (docs/color.md "The LUT
+    """rip/color/lutcache.py keeps each transform's 3-D LUT between processes (docs/color.md "The LUT
     cache"): the second Separator of a transform reads it instead of asking lcms, bit for
     bit the same table; another intent, profile or profile content is another file; a
     damaged file is made again; an empty WIDEPRINT_CACHE_DIR turns it off; a folder that
     cannot be written is no error."""
     from wideprint.rip import color
+    from wideprint.rip.color import lutcache
     monkeypatch.setenv("WIDEPRINT_CACHE_DIR", str(tmp_path / "c"))
     calls = []
     real = color.Separator._lut_eval
@@ -374,7 +375,7 @@ def test_lut_cache_reads_back_the_same_lut_and_keys_on_what_makes_it(profiles, t
     assert len(calls) == 5 and np.array_equal(mended._lut, first._lut)
     assert np.array_equal(np.load(files[0]), first._lut)
     # bounded: the least recently used go (a read counts as a use)
-    monkeypatch.setattr(color, "LUT_CACHE_FILES", 3)
+    monkeypatch.setattr(lutcache, "LUT_CACHE_FILES", 3)
     import os
     for i, f in enumerate(sorted((tmp_path / "c" / "lut3").iterdir())):
         os.utime(f, (1000 + i, 1000 + i))

@@ -81,7 +81,7 @@ def make_pdf(ps, pdf):
 
 
 def colour_flags(intent: int = 1):
-    """The RIP's default ICC set-up (rip/color.py), spelt out for a plain Ghostscript run."""
+    """The RIP's default ICC set-up (rip/color/), spelt out for a plain Ghostscript run."""
     cmyk, srgb = G.builtin_profile("cmyk"), G.builtin_profile("srgb")
     return [f"-sDefaultRGBProfile={srgb}", f"-sDefaultCMYKProfile={cmyk}", f"-sOutputICCProfile={cmyk}",
             f"-dRenderIntent={intent}", "-dOverrideRI", "-dBlackPtComp=0"]
