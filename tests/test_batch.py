@@ -19,7 +19,7 @@ import pyvips
 import tifffile
 
 from support.images import PX, random_planes, write_cmyk_tiff
-from corpus import bmp_rgb24, bmp_rle, gradient_rgb
+from support.corpus import bmp_rgb24, bmp_rle, gradient_rgb
 from wideprint.app.devices import open_device
 from wideprint.driver.job import PrintJob
 from wideprint.rip.pipeline import RipJob, RipSettings

@@ -2,7 +2,7 @@
 print` and `rip` fail each bad file with its own clear message and exit code - never a
 traceback, a hang, a partial output or raw control characters on the terminal - and the
 good files of the batch still print.  The loader's side of each case is in
-tests/corpus.py (tests/test_load.py's hostile corpus)."""
+tests/support/corpus.py (tests/test_load.py's hostile corpus)."""
 
 import json
 import os
@@ -15,7 +15,7 @@ import pytest
 import pyvips
 import tifffile
 
-from corpus import bmp_indexed, bmp_rgb24, bmp_rle, gradient_rgb, set_jpeg_size
+from support.corpus import bmp_indexed, bmp_rgb24, bmp_rle, gradient_rgb, set_jpeg_size
 from support.images import random_planes, write_cmyk_tiff
 from wideprint.rip.planes import read_planes
 

@@ -9,7 +9,6 @@ import subprocess
 import sys
 import textwrap
 import time
-from pathlib import Path
 
 import cv2
 import imagecodecs
@@ -20,11 +19,10 @@ import tifffile
 
 from wideprint.rip.load import ImageError, ImageSource, open_image
 
-sys.path.insert(0, str(Path(__file__).parent))
-import corpus  # noqa: E402
-from support.images import read_bands  # noqa: E402
-from corpus import (bmp_bytes, bmp_indexed, bmp_packed, bmp_rgb24, bmp_rle, gradient_rgb,  # noqa: E402
-                    strip_app14)
+from support import corpus
+from support.corpus import (bmp_bytes, bmp_indexed, bmp_packed, bmp_rgb24, bmp_rle, gradient_rgb,
+                            strip_app14)
+from support.images import read_bands
 
 
 def read_all(path, rows=37) -> tuple[ImageSource, np.ndarray]:

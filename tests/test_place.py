@@ -17,13 +17,10 @@ from wideprint.rip import place as P
 from wideprint.rip.load import ImageError, open_image
 from wideprint.rip.place import Placement, PlacedSource, place
 
-sys.path.insert(0, str(Path(__file__).parent))
-from corpus import bmp_rgb24, gradient_rgb  # noqa: E402
+from support.corpus import bmp_rgb24, gradient_rgb
+from support.images import read_bands as read_all
 
 ROW_UM = 68.55  # default profile: 137.1 um nozzle pitch / 2 heads per colour -> 370.53 rows/inch
-
-
-from support.images import read_bands as read_all  # noqa: E402
 
 
 def vips_resize(arr: np.ndarray, w: int, h: int, kernel: str, interpretation: str | None = None) -> np.ndarray:

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-import corpus
+from support import corpus
 from support.images import DEVICE_PPI, random_planes
 from support.rtl_encode import CONFIGS, ESC, encode_bits, encode_contone, expected_dots
 from wideprint.rip.inputs import sniff_input

@@ -10,4 +10,5 @@ Nothing here is part of the wideprint package.
 - marks: which tests are slow, system or gui
 - cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree
 - private_cups, private_mdns: a private cupsd and `serve --ipp`; avahi in private namespaces
+- corpus: hand-made BMPs and minimal headers, the hostile corpus of broken files
 - rtl_encode: an HP RTL writer of the tests' own, independent of rip/rtl.py"""
