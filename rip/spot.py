@@ -8,7 +8,7 @@ a media to its saved recipe, else to its Lab taken through the media's ICC profi
 between the target and what the profile says that recipe prints.
 
 Standard library plus numpy and pyvips: the rendering (rip/spot_pdf.py, rip/document.py)
-and the commands (app/spot_cli.py) share this module.
+and the commands (app/cli/spot.py) share this module.
 """
 
 from __future__ import annotations
