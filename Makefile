@@ -31,10 +31,11 @@ $(STAMP): setup.cfg pyproject.toml constraints.txt __init__.py
 	touch $(STAMP)
 
 # the numba kernels compiled ahead of time into rip/_aot*.so and device_sim/_aot*.so, so no
-# command imports numba or waits for its cache (app/aot.py, docs/rip.md "Compiled kernels");
-# built again whenever a source of those packages changes (until then they run on numba's JIT)
-$(AOT): $(STAMP) $(wildcard rip/*.py rip/*/*.py device_sim/*.py device_sim/*/*.py) app/aot.py app/warmup.py
-	$(BIN)/python -m wideprint.app.aot
+# command imports numba or waits for its cache (tools/build_kernels.py: build tooling, not in
+# the package; docs/rip.md "Compiled kernels"); built again whenever a source of those packages
+# changes (until then they run on numba's JIT)
+$(AOT): $(STAMP) $(wildcard rip/*.py rip/*/*.py device_sim/*.py device_sim/*/*.py) tools/build_kernels.py
+	$(BIN)/python tools/build_kernels.py
 	@mkdir -p build && touch $@
 
 $(IPP_BIN): $(IPP_SRC)

@@ -2,7 +2,7 @@
 fallback (docs/rip.md, "Compiled kernels").
 
 Every hot loop of the RIP and the emulator is a numba function marked `@kernel(...)`
-instead of `@njit(...)`.  `make` (app/aot.py) compiles the signatures the print and RIP
+instead of `@njit(...)`.  `make` (tools/build_kernels.py) compiles the signatures the print and RIP
 paths use into one extension module per package (`rip/_aot*.so`, `device_sim/_aot*.so`,
 with numba's `pycc`), beside a manifest naming, per kernel, which exported function takes
 which argument types.  A process that finds a module built from its own sources calls the
@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-MANIFEST = "_aot.json"          # beside the extension module: see app/aot.py
+MANIFEST = "_aot.json"          # beside the extension module: see tools/build_kernels.py
 MODULE = "_aot"
 OPTIONS = dict(cache=True, nogil=True)
 
@@ -108,7 +108,7 @@ _SCALARS = {int: "int64", float: "float64", bool: "bool"}
 
 
 def _key(a) -> str:
-    """What numba's typeof tells apart, as a short string (app/aot.py writes the same)."""
+    """What numba's typeof tells apart, as a short string (tools/build_kernels.py writes the same)."""
     if type(a) is np.ndarray:
         f = a.flags
         layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"

@@ -1,4 +1,4 @@
-"""The kernels compiled ahead of time (rip/compiled.py, app/aot.py; docs/rip.md "Compiled
+"""The kernels compiled ahead of time (rip/compiled.py, tools/build_kernels.py; docs/rip.md "Compiled
 kernels"): `make` builds them, the product's commands run on them without numba, they print
 exactly the dots numba's JIT prints, and anything they were not built for goes to the JIT."""
 

@@ -1,17 +1,21 @@
-"""Build the compiled kernels (`make` runs it; docs/rip.md, "Compiled kernels").
+"""Build the compiled kernels (`make kernels`, run by `make`; docs/rip.md "Compiled kernels").
 
-    python -m wideprint.app.aot
+    python tools/build_kernels.py
+
+Build tooling, not part of the installed package: a wheel ships no compiled kernels (they
+run on numba's JIT there); a checkout's `make` builds them.
 
 1. With numba's JIT (WIDEPRINT_KERNELS=jit), rip and print small generated jobs through
-   every path that has a kernel (app/warmup.py: every halftone method, pass count and pass
-   mask, 8/16 bits, RGB/CMYK; here also grey, the preview, the scanner model, dead-nozzle
+   every path that has a kernel (`warm`: every halftone method, pass count and pass mask,
+   8/16 bits, RGB/CMYK; then also grey, the preview, the scanner model, dead-nozzle
    compensation, RTL rows and RLE BMPs): numba's on-disk cache is filled, and each kernel
    called from Python has the signatures it is called with.
 2. Compile those signatures with numba's pycc into one extension module per package
-   (rip/_aot*.so, device_sim/_aot*.so), for this machine's CPU, with the GIL released, and
-   write the manifest beside it: the digest of the package's sources it was built from and,
-   per kernel, which exported function takes which argument types (rip/compiled.py reads
-   both and falls back to the JIT on anything else).
+   (rip/_aot*.so, device_sim/_aot*.so; a sub-package's kernels go into its top-level
+   package's), for this machine's CPU, with the GIL released, and write the manifest beside
+   it: the digest of the package's sources it was built from and, per kernel, which
+   exported function takes which argument types (rip/compiled.py reads both and falls back
+   to the JIT on anything else).
 
 pycc is the ahead-of-time compiler numba ships (pending deprecation in favour of a
 successor not released yet); it needs a C compiler and setuptools, both present wherever
@@ -28,6 +32,46 @@ import time
 from pathlib import Path
 
 
+def warm(verbose: bool = True) -> float:
+    """Rip and print a small generated image on the in-process emulator with every halftone
+    method, pass count and pass mask, 8 and 16 bits, RGB and CMYK: every kernel runs once on
+    numba's JIT, whose on-disk cache (`cache=True`) it fills, so a kernel the compiled
+    modules do not cover loads at its first call after set-up instead of compiling."""
+    import numpy as np
+    import tifffile
+
+    from wideprint.app.devices import close_device, open_device
+    from wideprint.driver.job import PrintJob
+    from wideprint.rip.pipeline import RipJob
+    from wideprint.rip.profile import load_profile
+    from wideprint.rip.settings import METHODS, PASS_MASKS, Placement, RipSettings
+
+    t0 = time.monotonic()
+    profile = load_profile()
+    rng = np.random.default_rng(0)
+    with tempfile.TemporaryDirectory(prefix="wideprint-warmup-") as d:
+        rgb = Path(d) / "rgb.tif"
+        tifffile.imwrite(rgb, rng.integers(0, 256, (48, 64, 3), dtype=np.uint8))
+        cmyk16 = Path(d) / "cmyk16.tif"
+        tifffile.imwrite(cmyk16, rng.integers(0, 65536, (48, 64, 4), dtype=np.uint16),
+                         photometric="separated")
+        runs = [(rgb, m, 1, "checker") for m in METHODS]
+        runs += [(rgb, "fs", n, mask) for n in (2, 4) for mask in PASS_MASKS]
+        runs += [(cmyk16, "bayer", 2, "checker")]
+        for path, method, passes, mask in runs:
+            settings = RipSettings(dither=method, passes=passes, pass_mask=mask, bidir=passes > 1,
+                                   placement=Placement(size="pixels"))
+            dev = open_device("emulator", profile, media_path=str(Path(d) / "m.tif"))
+            try:
+                PrintJob(dev, RipJob(str(path), settings, profile)).run()
+            finally:
+                close_device(dev)
+    took = time.monotonic() - t0
+    if verbose:
+        print(f"wideprint: numba kernels compiled and cached in {took:.1f} s")
+    return took
+
+
 # a small EPS with a CMYK box (the document path: Ghostscript renders CMYK bands)
 _EPS = (b"%!PS-Adobe-3.0 EPSF-3.0\n%%BoundingBox: 0 0 36 24\n"
         b"0.2 0.4 0.1 0.3 setcmykcolor 4 4 20 12 rectfill showpage\n%%EOF\n")
@@ -38,11 +82,10 @@ def exercise() -> None:
     import numpy as np
     import tifffile
 
-    from . import api
-    from .warmup import warm
+    from wideprint.app import api
+    from wideprint.rip import deadrows, planes, rtl
+    from wideprint.rip.load import bmp
     warm(verbose=False)
-    from ..rip import deadrows, planes, rtl  # noqa: F401  (their kernels)
-    from ..rip.load import bmp
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory(prefix="wideprint-aot-") as d:
         images = []
@@ -64,8 +107,8 @@ def exercise() -> None:
             if not r.ok:                # no Ghostscript here: that path stays with the JIT
                 print(f"aot: the EPS path not exercised ({r.message})", file=sys.stderr)
         planes.write_preview(media, Path(d) / "m.png")
-        from ..rip.pipeline import RipJob
-        from ..rip.settings import Placement, RipSettings
+        from wideprint.rip.pipeline import RipJob
+        from wideprint.rip.settings import Placement, RipSettings
         for fmt in planes.FORMATS:                  # `rip -o`: the RIP's bits to the planes file
             RipJob(str(images[1]), RipSettings(dither="bayer", placement=Placement(size="pixels"))
                    ).write_planes(Path(d) / f"p-{fmt}.tif", fmt)
@@ -73,9 +116,9 @@ def exercise() -> None:
         api.predict_scan(grey, Path(d) / "scan.tif", size="pixels")
         api.predict_scan(grey, Path(d) / "scan-grey.tif", size="pixels", grey=True)
         # the spectrophotometer's kernels (device_sim/spectro.py): a print measured
-        from ..driver.job import PrintJob
-        from ..rip.profile import load_profile
-        from .devices import close_device, open_device
+        from wideprint.app.devices import close_device, open_device
+        from wideprint.driver.job import PrintJob
+        from wideprint.rip.profile import load_profile
         prof = load_profile()
         dev = open_device("emulator", prof, media_path=str(media),
                           spectro_path=str(Path(d) / "lab.tif"), spectro_dpi=50)
@@ -114,7 +157,7 @@ def build(verbose: bool = True) -> dict[str, int]:
     import numba.pycc.compiler as pycc_compiler
     from numba.pycc import CC
 
-    from ..rip.compiled import KERNELS, MANIFEST, MODULE, sources_digest
+    from wideprint.rip.compiled import KERNELS, MANIFEST, MODULE, sources_digest
 
     class _ReleaseGil(pycc_compiler.Flags):
         """numba's `nogil=True` for the exported functions' wrappers (pycc has no option)."""
@@ -162,6 +205,7 @@ def build(verbose: bool = True) -> dict[str, int]:
               + ", ".join(f"{n} signatures of {p}" for p, n in counts.items())
               + f" compiled ahead of time in {time.monotonic() - t1:.0f} s")
     return counts
+
 
 
 if __name__ == "__main__":
