@@ -344,7 +344,8 @@ def write_corpus(d) -> list[Case]:
         "image too large: 60000 x 80000 px exceeds the limit of 4.0 Gpx")
     add("bmp_jpeg.bmp", bmp_bytes(width=8, height=8, bpp=24, pixel_data=b"\xff\xd8" + b"\x00" * 62, compression=4),
         "unsupported BMP compression embedded JPEG")
-    add("bmp64.bmp", bmp_bytes(width=8, height=8, bpp=64, pixel_data=b"\x00" * 512), "unsupported bit depth: 64-bit BMP")
+    add("bmp64.bmp", bmp_bytes(width=8, height=8, bpp=64, pixel_data=b"\x00" * 512),
+        "unsupported bit depth: 64-bit BMP")
     bad_hdr = bytearray(good)
     bad_hdr[14:18] = struct.pack("<I", 77)
     add("bmp_bad_header.bmp", bytes(bad_hdr), "corrupt BMP: unknown header size 77")
