@@ -39,8 +39,8 @@ def _tiff_header(path: str, size: int, max_pixels: int, max_side: int) -> _Hdr:
             sfmt = int(sfmt[0]) if isinstance(sfmt, tuple) else int(sfmt)
             photometric = int(page.photometric)
             extrasamples = tuple(int(e) for e in (page.extrasamples or ()))
-            inkset = tags.get("InkSet")
-            inkset = int(inkset.value) if inkset is not None else None
+            ink_tag = tags.get("InkSet")
+            inkset = int(ink_tag.value) if ink_tag is not None else None
             offsets = np.asarray(page.dataoffsets, dtype=np.int64)
             counts = np.asarray(page.databytecounts, dtype=np.int64)
             tiled = bool(page.is_tiled)

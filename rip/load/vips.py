@@ -277,7 +277,8 @@ def _vips_plan(path: str, fmt: str, img, hdr: _Hdr) -> _VipsPlan:
 
 def _open_vips(path: str, fmt: str, hdr: _Hdr, max_pixels: int, max_side: int) -> ImageSource:
     pv = _vips()
-    reader: _VipsReader | _StripReader = _VipsReader(path, fmt, _VipsPlan(0, None, "", 8))
+    vips_reader = _VipsReader(path, fmt, _VipsPlan(0, None, "", 8))
+    reader: _VipsReader | _StripReader = vips_reader
     try:
         img = reader.open()
     except pv.Error as e:
@@ -293,7 +294,7 @@ def _open_vips(path: str, fmt: str, hdr: _Hdr, max_pixels: int, max_side: int) -
     except pv.Error as e:
         raise ImageError(path, _vips_problem(fmt, str(e), path)) from None
     if fmt == "tiff" and _StripReader.fits(hdr, plan):
-        reader = _StripReader(path, plan, hdr, reader)
+        reader = _StripReader(path, plan, hdr, vips_reader)
     icc = None
     if img.get_typeof("icc-profile-data") != 0:
         try:
