@@ -526,12 +526,9 @@ def cmd_calibrate(args) -> int:
         else:
             res = calibrate(args.kind, args.scan, profile, args.dpi, args.width_mm, args.scan_dpi,
                             getattr(args, "passes", None))
-    except (ValueError, ProfileError, OSError) as exc:
-        print(f"wideprint calibrate: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except CalibrationError as exc:
-        print(f"wideprint calibrate {args.kind}: {exc}", file=sys.stderr)
-        return EXIT_NOT_FOUND
+    except (ValueError, ProfileError, OSError, CalibrationError) as exc:
+        from .quality import scan_failure
+        return scan_failure(exc, "calibrate", f"calibrate {args.kind}")
     written = None
     if args.write:
         try:

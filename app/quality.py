@@ -426,16 +426,25 @@ def measure_registered(light: np.ndarray, to_scan: np.ndarray, pix_um: float,
 
 
 # -- the command --------------------------------------------------------------------------
+def scan_failure(exc: Exception, command: str, where: str) -> int:
+    """Why a command that measures a scan (`quality`, `calibrate`) failed, said on stderr,
+    and its exit status: bad input (an argument, the profile, a file that cannot be read:
+    ValueError, ProfileError, OSError) is a usage error, 2, said as `wideprint COMMAND: ...`;
+    anything else the command raised (what it looked for not found on the scan) is 3, said
+    with `where` (the scan, the pattern measured)."""
+    if isinstance(exc, (ValueError, OSError)):      # ProfileError is a ValueError
+        print(f"wideprint {command}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"wideprint {where}: {exc}", file=sys.stderr)
+    return EXIT_NOT_FOUND
+
+
 def cmd_quality(args) -> int:
     from ..rip.profile import ProfileError, load_profile
     try:
         profile = load_profile(args.profile) if args.profile else None
         rep = measure_scan(args.scan, args.scan_dpi, args.viewing_distance_mm, args.passes, profile)
-    except (ValueError, ProfileError, OSError) as exc:
-        print(f"wideprint quality: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except QualityError as exc:
-        print(f"wideprint quality: {args.scan}: {exc}", file=sys.stderr)
-        return EXIT_NOT_FOUND
+    except (ValueError, ProfileError, OSError, QualityError) as exc:
+        return scan_failure(exc, "quality", f"quality: {args.scan}")
     print(json.dumps(rep.as_dict(), ensure_ascii=False) if args.json else rep.text())
     return EXIT_OK

@@ -835,15 +835,6 @@ class PrintServer:
                           costs.read(self.state_dir) if with_costs else None)
 
 
-def _unlink(path: str) -> None:
-    try:
-        os.unlink(path)
-    except FileNotFoundError:
-        pass
-    except OSError as exc:
-        log.warning("cannot delete %s: %s", path, exc.strerror)
-
-
 def _version() -> str:
     try:
         from ... import __version__
@@ -855,7 +846,7 @@ def _version() -> str:
 def serve(config: ServerConfig, ready=None) -> int:
     """Run the server until SIGTERM/SIGINT: a job printing then is paused at its next stroke
     boundary and resumed by the next start."""
-    # the colour transforms' cache (rip/color.py) in the state directory: what clients send
+    # the colour transforms' cache (rip/color/lutcache.py) in the state directory: what clients send
     # (embedded profiles) makes files there, never in the service user's home
     os.environ.setdefault("WIDEPRINT_CACHE_DIR", str(Path(config.state_dir) / "cache"))
     server = PrintServer(config)
