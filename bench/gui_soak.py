@@ -322,6 +322,7 @@ def run(minutes: float, replay_hz: float, out: Path | None, keep: Path | None = 
     res["objects"]["new_dicts_by_keys"] = next((s["new_dicts_by_keys"] for s in samples_all
                                                if "new_dicts_by_keys" in s), None)
     res["samples_data"] = samples
+    res["server_rss_samples_mb"] = [round(r, 1) for r in server_rss]   # every SAMPLE_S: its curve
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(res, indent=1) + "\n")
