@@ -15,7 +15,7 @@ SAMPLE := resources/samples/sample.tif
 # the IPP Everywhere Printer Application (docs/ipp.md): C against PAPPL (libpappl-dev)
 IPP_BIN := app/ipp/wideprint-ipp
 IPP_SRC := app/ipp/wideprint-ipp.c
-# avahi for the DNS-SD test (tests/private_mdns.py): Debian's avahi-daemon and avahi-utils
+# avahi for the DNS-SD test (tests/support/private_mdns.py): Debian's avahi-daemon and avahi-utils
 # unpacked, not installed - the test runs its own daemon in private namespaces and the
 # machine gets no mDNS service of its own (docs/ipp.md "DNS-SD")
 AVAHI  := build/avahi/.unpacked
