@@ -15,7 +15,7 @@ import pytest
 
 from support.images import random_planes, write_cmyk_tiff
 from support.server import wait_for
-from wideprint.app.client import Client
+from wideprint.app.client import ApiError, Client
 from wideprint.app.server.rolls import paper_per_copy_mm, roll_warning
 
 
@@ -185,3 +185,30 @@ def test_the_cli_says_the_warning_under_the_roll_and_the_printer(print_server, c
     assert main(["status", "--state-dir", str(s.state_dir)]) == 0
     out = capsys.readouterr().out
     assert "printer  main: idle  [paused: started paused]\n         WARNING: roll low: 0.50 m" in out
+
+
+def test_each_roll_has_its_own_spare(print_server, capsys):
+    """The 1 m spare is the default; a roll may say its own (POST roll `spare_m`, `printer
+    roll load|set --spare M`), 0 .. 1,000 m, kept with the roll until another is loaded."""
+    s = print_server(start_paused=True)
+    c = Client(s.state_dir)
+    try:
+        r = c.roll("main", {"media": "vinyl-300", "length_m": 2, "spare_m": 0})
+        assert r["roll"]["spare_m"] == 0 and c.printers()[0]["warnings"] == []
+        r = c.roll("main", {"spare_m": "3m"})                 # set on the roll loaded
+        assert r["roll"]["spare_m"] == 3.0 and r["roll"]["remaining_m"] == 2.0
+        [w] = c.printers()[0]["warnings"]
+        assert "(less than 3 m to spare)" in w["message"]
+        for bad in (-1, 1001, "lots", True):
+            with pytest.raises(ApiError) as e:
+                c.roll("main", {"spare_m": bad})
+            assert e.value.status == 400 and "spare" in str(e.value)
+        c.roll("main", {"media": "vinyl-300", "length_m": 2})  # a new roll: the default again
+        assert c.roll("main")["roll"]["spare_m"] == 1.0 and c.printers()[0]["warnings"] == []
+        from wideprint.app.cli import main
+        capsys.readouterr()
+        assert main(["printer", "roll", "set", "--spare", "2.5", "--state-dir", str(s.state_dir)]) == 0
+        assert "WARNING: roll low: 2.00 m of vinyl-300 left (less than 2.5 m to spare)" in \
+            capsys.readouterr().out
+    finally:
+        c.close()

@@ -53,6 +53,8 @@ def add_parser(sub) -> None:
     r.add_argument("--label", metavar="TEXT", help="roll load: the roll's label as read, e.g. "
                    "'media=vinyl-300 length=50m'")
     r.add_argument("--remaining", metavar="M", help="roll set: what is left on it, measured")
+    r.add_argument("--spare", metavar="M", help="roll load, set: warn when the roll left is less "
+                   "than the jobs waiting need plus this (default 1 m)")
     r.add_argument("--state-dir", metavar="DIR", help="the server's state directory")
     p.set_defaults(func=cmd_printer)
 
@@ -80,12 +82,13 @@ def cmd_roll(args) -> int:
     body: dict | None = None
     if what == "load":
         body = {k: v for k, v in (("media", args.media), ("length_m", args.length),
-                                  ("label", args.label)) if v is not None}
+                                  ("label", args.label), ("spare_m", args.spare)) if v is not None}
     elif what == "set":
-        if args.remaining is None:
-            print("wideprint printer roll set: --remaining M", file=sys.stderr)
+        if args.remaining is None and args.spare is None:
+            print("wideprint printer roll set: --remaining M and/or --spare M", file=sys.stderr)
             return EXIT_USAGE
-        body = {"remaining_m": args.remaining}
+        body = {k: v for k, v in (("remaining_m", args.remaining), ("spare_m", args.spare))
+                if v is not None}
     elif what == "unload":
         body = {"unload": True}
     try:

@@ -521,15 +521,16 @@ class PrintServer:
     # -- rolls, prices and costs (docs/server.md "Rolls", "Prices and costs") -------------------
     def roll(self, name: str, body: dict | None = None) -> dict:
         """A printer's roll: as it is (body None), or a new one loaded (`load`), what is
-        left measured (`remaining_m`), or taken off (`unload`)."""
+        left measured (`remaining_m`) and/or its warning's spare (`spare_m`), or taken off
+        (`unload`)."""
         w = self.printer_worker(name)
         if body is not None:
             if not isinstance(body, dict):
                 raise Invalid("expected a JSON object")
             if body.get("unload") is True and len(body) == 1:
                 self.rolls.unload(name)
-            elif set(body) == {"remaining_m"}:
-                self.rolls.set_remaining(name, body["remaining_m"])
+            elif body and set(body) <= {"remaining_m", "spare_m"}:     # the roll loaded
+                self.rolls.set_remaining(name, body.get("remaining_m"), body.get("spare_m"))
             else:
                 self.rolls.load(name, body, w.paper_mm)
             log.info("printer %s: roll %s", name, self.rolls.get(name))

@@ -15,18 +15,29 @@ import time
 
 from .validate import Invalid
 
-ROLL_KEYS = {"media", "length_m", "label", "remaining_m", "width_mm"}
+ROLL_KEYS = {"media", "length_m", "label", "remaining_m", "width_mm", "spare_m"}
 # a roll's label as its barcode or the operator reads it: `media=vinyl-300 length=50m`
 # (length in m, or mm with the unit), separated by blanks, ';' or ','
 LABEL_FIELD = re.compile(r"^(media|length|width)=(\S+)$")
 
+# a job the worker held because the roll could not hold it says so in its message
+# (worker.py _next_job); the roll's warning keeps counting it until a new roll is loaded
+ROLL_HELD = "held before printing; load a new roll"
+#: the roll left, over what the jobs waiting need, below which the printer warns (m)
+WARN_SPARE_M = 1.0
+
+
+def _metres(text, what: str, example: str) -> float:
+    """'50', '50m', '50000mm', '50.5 m' -> metres; Invalid naming `what` otherwise."""
+    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]+)?)\s*(m|mm|cm)?\s*", str(text))
+    if not m:
+        raise Invalid(f"{what} {text!r}: expected metres, e.g. {example}")
+    return float(m.group(1)) * {"m": 1.0, None: 1.0, "cm": 0.01, "mm": 0.001}[m.group(2)]
+
 
 def parse_length_m(text: str, what: str = "length") -> float:
     """'50', '50m', '50000mm', '50.5 m' -> metres; Invalid otherwise."""
-    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]+)?)\s*(m|mm|cm)?\s*", str(text))
-    if not m:
-        raise Invalid(f"{what} {text!r}: expected metres, e.g. 50 or 50m or 50000mm")
-    v = float(m.group(1)) * {"m": 1.0, None: 1.0, "cm": 0.01, "mm": 0.001}[m.group(2)]
+    v = _metres(text, what, "50 or 50m or 50000mm")
     if not 0 < v <= 10_000:
         raise Invalid(f"{what} {text!r}: a roll is 0..10,000 m long")
     return v
@@ -52,12 +63,25 @@ def parse_label(label: str) -> dict:
     return out
 
 
+def parse_spare_m(value) -> float:
+    """The warning's spare for a roll (docs/server.md "Rolls: the warning"): metres, 0..1000
+    (a number, or text as for a length: '3', '3m', '500mm'); Invalid otherwise."""
+    if isinstance(value, bool):
+        raise Invalid("spare_m: metres, 0..1000")
+    v = float(value) if isinstance(value, (int, float)) else \
+        _metres(value, "spare", "3 or 3m or 500mm")
+    if not 0 <= v <= 1000:
+        raise Invalid(f"spare {value!r}: 0..1,000 m")
+    return v
+
+
 def _roll_dict(row) -> dict | None:
     if row is None:
         return None
     d = dict(row)
     d["remaining_m"] = None if d["remaining_mm"] is None else round(d["remaining_mm"] / 1000, 3)
     d["length_m"] = None if d["length_mm"] is None else round(d["length_mm"] / 1000, 3)
+    d["spare_m"] = WARN_SPARE_M if d.get("spare_mm") is None else round(d["spare_mm"] / 1000, 3)
     return d
 
 
@@ -96,20 +120,28 @@ class Rolls:
                                   or not 10 <= width <= 5000):
             raise Invalid("width_mm must be a number of 10..5000")
         mm = None if length is None else length * 1000
+        spare = body.get("spare_m")
+        spare_mm = None if spare is None else parse_spare_m(spare) * 1000
         with self.spool.tx() as c:
             c.execute("INSERT OR REPLACE INTO rolls (printer, media, width_mm, length_mm, "
-                      "remaining_mm, loaded, label) VALUES (?,?,?,?,?,?,?)",
-                      (printer, media, width, mm, mm, time.time(), label))
+                      "remaining_mm, loaded, label, spare_mm) VALUES (?,?,?,?,?,?,?,?)",
+                      (printer, media, width, mm, mm, time.time(), label, spare_mm))
         return self.get(printer)  # type: ignore[return-value]
 
-    def set_remaining(self, printer: str, remaining_m) -> dict:
-        """The operator measured what is left (a roll taken off and put back)."""
-        mm = parse_length_m(remaining_m, "remaining") * 1000
+    def set_remaining(self, printer: str, remaining_m=None, spare_m=None) -> dict:
+        """The operator measured what is left (a roll taken off and put back), and/or set
+        the warning's spare for this roll."""
         with self.spool.tx() as c:
-            n = c.execute("UPDATE rolls SET remaining_mm=?, length_mm=MAX(COALESCE(length_mm, 0), ?) "
-                          "WHERE printer=?", (mm, mm, printer)).rowcount
-        if not n:
-            raise Invalid(f"printer {printer}: no roll loaded (load one first)", 409)
+            n = c.execute("SELECT COUNT(*) FROM rolls WHERE printer=?", (printer,)).fetchone()[0]
+            if not n:
+                raise Invalid(f"printer {printer}: no roll loaded (load one first)", 409)
+            if remaining_m is not None:
+                mm = parse_length_m(remaining_m, "remaining") * 1000
+                c.execute("UPDATE rolls SET remaining_mm=?, length_mm=MAX(COALESCE(length_mm, 0), "
+                          "?) WHERE printer=?", (mm, mm, printer))
+            if spare_m is not None:
+                c.execute("UPDATE rolls SET spare_mm=? WHERE printer=?",
+                          (parse_spare_m(spare_m) * 1000, printer))
         return self.get(printer)  # type: ignore[return-value]
 
     def unload(self, printer: str) -> None:
@@ -148,24 +180,21 @@ def short_of_roll(roll: dict | None, need_mm: float) -> str:
             f"{left / 1000:,.2f} m left")
 
 
-# a job the worker held because the roll could not hold it says so in its message
-# (worker.py _next_job); the roll's warning keeps counting it until a new roll is loaded
-ROLL_HELD = "held before printing; load a new roll"
-#: the roll left, over what the jobs waiting need, below which the printer warns (m)
-WARN_SPARE_M = 1.0
-
 
 def roll_warning(roll: dict | None, waiting: list[tuple[dict, float]],
-                 spare_m: float = WARN_SPARE_M) -> dict | None:
+                 spare_m: float | None = None) -> dict | None:
     """The printer's warning before a job runs off the roll (docs/server.md "Rolls: the
     warning"): `waiting` is each job the printer will take, in the order it takes them,
     with the paper it needs (mm; the printing job's copies left first).  A warning - not a
-    fault, nothing stops - when the roll left is less than what they need plus `spare_m`:
+    fault, nothing stops - when the roll left is less than what they need plus `spare_m`
+    (None: the roll's own spare, `spare_mm`, else WARN_SPARE_M):
     {kind: "media-low", message, remaining_m, need_m, job, name} where job/name is the
     first job the roll cannot hold (None when all fit and only the spare is short).  None
     when the roll's length is not known or it holds them with the spare."""
     if roll is None or roll.get("remaining_mm") is None:
         return None
+    if spare_m is None:
+        spare_m = WARN_SPARE_M if roll.get("spare_mm") is None else roll["spare_mm"] / 1000
     left = float(roll["remaining_mm"])
     need = sum(mm for _, mm in waiting)
     if left >= need + spare_m * 1000:

@@ -106,7 +106,8 @@ CREATE TABLE IF NOT EXISTS rolls (
     length_mm      REAL,                      -- as loaded (entered or from its label), NULL: unknown
     remaining_mm   REAL,                      -- length less every feed since (NULL: unknown)
     loaded         REAL NOT NULL,
-    label          TEXT NOT NULL DEFAULT ''
+    label          TEXT NOT NULL DEFAULT '',
+    spare_mm       REAL                       -- the warning's spare (NULL: 1 m, rolls.py)
 );
 """
 
@@ -131,7 +132,8 @@ ADDED_COLUMNS = (("jobs", "attempt", "INTEGER NOT NULL DEFAULT 1"),
                  ("jobs", "rip_hold", "INTEGER NOT NULL DEFAULT 0"),
                  ("jobs", "ripped", "TEXT"),
                  ("jobs", "spots", "TEXT"),
-                 ("prints", "spots", "TEXT"))
+                 ("prints", "spots", "TEXT"),
+                 ("rolls", "spare_mm", "REAL"))
 # columns renamed since: (table, old name, new name), renamed in older databases.  Schema 3:
 # carriage movements are strokes; a pass is the weave's (docs/architecture.md, "Words")
 RENAMED_COLUMNS = (("jobs", "passes_total", "strokes_total"),
