@@ -231,27 +231,11 @@ class PrintCommand:
     def print_file(self, i: int, f: str, job_id: int) -> bool:
         """File `f` (and the files nested with it) ripped and printed as job `job_id`, its
         report added; False when the run stops here (the job was cancelled)."""
-        from ...rip.load import ImageError
-        from ...rip.pipeline import RipJob
         media_file = self.job_outputs(i, job_id)
-        if f in self.unlisted:
-            self.job_failed(f, self.unlisted[f], dict(job_id=job_id))
+        prepared = self.prepare(i, f, job_id)
+        if prepared is None:
             return True
-        try:
-            rip = RipJob(f, self.settings, self.profile, more=self.extras[i])
-        except (ImageError, ValueError, OSError) as exc:
-            self.job_failed(f, str(exc), dict(job_id=job_id))
-            return True
-        cut_report = None
-        if self.args.cut_out:               # before printing: a file without cut paths is said
-            from ...rip.cutfile import write_job_cut
-            try:
-                cut_report = write_job_cut(str(self.output(self.args.cut_out, i)), rip,
-                                           self.settings, self.profile)
-            except (ValueError, OSError) as exc:
-                rip.close()
-                self.job_failed(f, f"cut file: {exc}", dict(job_id=job_id))
-                return True
+        rip, cut_report = prepared
         label = f"{i + 1}/{len(self.files)} {shown(Path(f).name, 60)}" \
             + (f" +{len(self.extras[i])} nested" if self.extras[i] else "")
         run = self.run_job(rip, job_id, f, label)
@@ -274,6 +258,30 @@ class PrintCommand:
         self.printed(i, f, job_id, rip, rep, media_file)
         self.reports.append(rep)
         return True
+
+    def prepare(self, i: int, f: str, job_id: int) -> tuple[Any, dict | None] | None:
+        """Job i's RipJob and, for print and cut, its cut file written before printing (a
+        file without cut paths is said then); None when it cannot print (failed, said)."""
+        from ...rip.load import ImageError
+        from ...rip.pipeline import RipJob
+        if f in self.unlisted:
+            self.job_failed(f, self.unlisted[f], dict(job_id=job_id))
+            return None
+        try:
+            rip = RipJob(f, self.settings, self.profile, more=self.extras[i])
+        except (ImageError, ValueError, OSError) as exc:
+            self.job_failed(f, str(exc), dict(job_id=job_id))
+            return None
+        if not self.args.cut_out:
+            return rip, None
+        from ...rip.cutfile import write_job_cut
+        try:
+            return rip, write_job_cut(str(self.output(self.args.cut_out, i)), rip,
+                                      self.settings, self.profile)
+        except (ValueError, OSError) as exc:
+            rip.close()
+            self.job_failed(f, f"cut file: {exc}", dict(job_id=job_id))
+            return None
 
     def output(self, pattern: str | None, i: int) -> str | None:
         """Job i's file of an output option (-N suffix or {job} with several files)."""
@@ -327,6 +335,22 @@ class PrintCommand:
 
     def printed(self, i: int, f: str, job_id: int, rip, rep: dict, media_file: str | None) -> None:
         """A job that printed: its outputs checked and said, the preview or proof drawn."""
+        self.check_outputs(f, job_id, rep, media_file)
+        self.say_printed(i, f, rip, rep)
+        args = self.args
+        if args.preview and args.proof:
+            if not _proof(f, self.output(args.preview, i) or args.preview,
+                          self.settings, self.profile, rep, self.say):
+                self.failed += 1
+        elif args.preview:
+            preview = self.output(args.preview, i)
+            # the media's file: --media-out's, else the scratch folder's (open_device)
+            assert media_file is not None and preview is not None
+            self.preview(f, media_file, preview, rep)
+
+    def check_outputs(self, f: str, job_id: int, rep: dict, media_file: str | None) -> None:
+        """The media, scan and spectro files in the report; a media file asked for and not
+        written fails the job although it printed."""
         args = self.args
         emu = self.dev.emulator                     # the in-process emulator, or None
         rep["media"] = media_file if args.media_out else None
@@ -343,6 +367,9 @@ class PrintCommand:
             rep["spectro"] = self.spectros[job_id]
         if emu is not None:
             rep["stray_drops"] = emu.jobs_done.get(job_id, {}).get("stray")
+
+    def say_printed(self, i: int, f: str, rip, rep: dict) -> None:
+        """What printed: strokes, dots, ink and files; the spots and the layout."""
         say = self.say
         print(f"{shown(f, NAME_LIMIT)}: printed {rep['strokes_printed']} strokes, "
               f"{rep['width_dots']} x {rep['height_rows']} dots, "
@@ -358,15 +385,6 @@ class PrintCommand:
             from ...rip.layout import layout_line
             rep["files"] = [f, *self.extras[i]]
             print(f"{shown(f, NAME_LIMIT)}: {layout_line(rep['layout'])}", file=say)
-        if args.preview and args.proof:
-            if not _proof(f, self.output(args.preview, i) or args.preview,
-                          self.settings, self.profile, rep, say):
-                self.failed += 1
-        elif args.preview:
-            preview = self.output(args.preview, i)
-            # the media's file: --media-out's, else the scratch folder's (open_device)
-            assert media_file is not None and preview is not None
-            self.preview(f, media_file, preview, rep)
 
     def preview(self, f: str, media_file: str, preview: str, rep: dict) -> None:
         """--preview: the media drawn as a PNG; the media file goes after unless asked for."""
