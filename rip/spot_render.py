@@ -134,8 +134,12 @@ def file_spots(path: str, settings, book: SpotBook | None = None) -> list[dict]:
     """The report's spot entries of one file as `prepare` makes them, without rewriting or
     rendering it: a PDF's resources are read (milliseconds), a PostScript or EPS program
     is probed by Ghostscript; [] for an image or RTL, or a PDF that QPDF cannot read."""
-    from .inputs import sniff_input
-    fmt = sniff_input(path)
+    from .ghostscript import sniff_document        # not rip/inputs.py: it imports the document
+    try:
+        with open(path, "rb") as f:
+            fmt = sniff_document(f.read(1024))
+    except OSError:
+        return []
     if fmt not in ("pdf", "ps", "eps"):
         return []
     names: dict[str, str] = {}
