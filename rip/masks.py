@@ -58,3 +58,105 @@ def modulation_noise() -> np.ndarray:
     noise = (ranks * 256 // ranks.size).astype(np.uint8)
     noise.setflags(write=False)
     return noise
+
+
+# -- pass masks that hide a measured machine's nozzles (issue 36, docs/quality.md) ------------
+#: the banding one unit of a row's error makes on the typical machine at 4 passes (ΔL*, eye-
+#: weighted; bench/README.md "Banding and grain"): per µm of the row's mean landing error
+#: along the feed and per 1 % of its mean drop volume
+HIDE_DY_PER_UM = 0.053
+HIDE_VOLUME_PER_PCT = 0.038
+#: what a nozzle's measured error is uncertain by (the nozzle check's noise and the errors it
+#: does not see): µm along the feed, % of volume; it keeps the shares from leaning on one nozzle
+HIDE_DY_NOISE_UM = 1.0
+HIDE_VOLUME_NOISE_PCT = 1.0
+#: the feed's random error per feed (µm) the shares are made robust to: 0, the best measured
+#: on the typical machine (3 µm: 0.057 against 0.050, bench/README.md)
+HIDE_FEED_NOISE_UM = 0.0
+
+
+def _simplex_qp(q: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """argmin w'Qw - 2c'w over w >= 0, sum w = 1 (N <= 8: every support tried, KKT on each)."""
+    n = c.size
+    best, best_w = np.inf, np.full(n, 1.0 / n)
+    for support in range(1, 1 << n):
+        s = np.flatnonzero([(support >> i) & 1 for i in range(n)])
+        k = s.size
+        kkt = np.zeros((k + 1, k + 1))
+        kkt[:k, :k] = 2 * q[np.ix_(s, s)]
+        kkt[:k, k] = kkt[k, :k] = 1.0
+        try:
+            sol = np.linalg.solve(kkt, np.concatenate([2 * c[s], [1.0]]))
+        except np.linalg.LinAlgError:
+            continue
+        if (sol[:k] < -1e-12).any():
+            continue
+        w = np.zeros(n)
+        w[s] = np.clip(sol[:k], 0.0, None)
+        w /= w.sum()
+        val = float(w @ q @ w - 2 * c @ w)
+        if val < best - 1e-15:
+            best, best_w = val, w
+    return best_w
+
+
+def hiding_weights(dy_um: np.ndarray, volume: np.ndarray, slots: np.ndarray,
+                   dy_noise_um: float = HIDE_DY_NOISE_UM,
+                   volume_noise_pct: float = HIDE_VOLUME_NOISE_PCT,
+                   feed_noise_um: float = HIDE_FEED_NOISE_UM,
+                   stroke_error_um: float = 0.0) -> np.ndarray:
+    """The shares of a row's dots each pass prints, so that the nozzles' measured errors
+    cancel row by row instead of averaging ("nozzle-error hiding"): `dy_um` (the nozzles'
+    landing error along the feed, µm) and `volume` (drop volume, 1 nominal), both (heads,
+    nozzles) as a calibration measures them; `slots` (4, A, N, 2) the (head, nozzle) printing
+    colour c's row phase r in pass j (-1: none).  Per colour and row phase: the shares
+    w >= 0, sum 1, that bring the row's mean error, sum w e, nearest the colour's mean over
+    its nozzles, weighted by the banding each makes, plus the measurement's uncertainty
+    times sum w² (which alone gives equal shares, what no knowledge of the errors allows),
+    plus `stroke_error_um` (the paper's error at each stroke that the shares cannot follow:
+    the driver's whole-step rounding, `stroke_error_um()`) times |w - equal|²: a row that
+    leans on other passes than its neighbours is shifted by it.  Returns (4, A, N) float64
+    (docs/quality.md "Masks against the machine")."""
+    colours, a, n = slots.shape[:3]
+    out = np.full((colours, a, n), 1.0 / n)
+    for c in range(colours):
+        h, z = slots[c, :, :, 0], slots[c, :, :, 1]
+        live = h >= 0
+        if not live.any():
+            continue
+        d = np.where(live, dy_um[h, z], 0.0) * HIDE_DY_PER_UM
+        v = np.where(live, (volume[h, z] - 1.0) * 100.0, 0.0) * HIDE_VOLUME_PER_PCT
+        d_target, v_target = d[live].mean(), v[live].mean()
+        lam = (dy_noise_um * HIDE_DY_PER_UM) ** 2 + (volume_noise_pct * HIDE_VOLUME_PER_PCT) ** 2
+        for r in range(a):
+            ok = np.flatnonzero(live[r])
+            dd, vv = d[r, ok], v[r, ok]
+            # the paper's position at pass j carries the feeds' random errors up to it (a
+            # random walk): rows that lean on other passes than their neighbours see it as
+            # a shift.  The driver's whole-step rounding differs from stroke to stroke, which
+            # shares fixed per row phase cannot follow: it pulls them towards equal shares
+            jj = ok.astype(np.float64)
+            walk = np.minimum(jj[:, None], jj[None, :]) * (feed_noise_um * HIDE_DY_PER_UM) ** 2
+            even = np.full(ok.size, 1.0 / ok.size)
+            st = (stroke_error_um * HIDE_DY_PER_UM) ** 2
+            q = np.outer(dd, dd) + np.outer(vv, vv) + (lam + st) * np.eye(ok.size) + walk
+            w = _simplex_qp(q, d_target * dd + v_target * vv + walk @ even + st * even)
+            out[c, r] = 0.0
+            out[c, r, ok] = w
+    return out
+
+
+def stroke_error_um(profile, passes: int, strokes: int = 2000) -> float:
+    """The RMS error of the paper's position at a stroke that the driver's whole-step feeds
+    leave (rip/profile.py `feed_steps_for_rows`: each feed rounded from the absolute target,
+    up to half a step off), against the mean of the strokes that print a row: 6.5 µm at 4
+    passes on the default profile, 0 where the weave's advance is a whole number of steps."""
+    s0, s1 = profile.usable_slots()
+    a = (s1 - s0) // passes
+    rows = np.arange(strokes) * a
+    steps = np.array([profile.feed_steps_for_rows(int(r)) for r in rows], np.float64)
+    err = steps * profile.feed_um_per_step - rows * profile.row_um
+    # what a row's passes see: each stroke's error against the mean of the N strokes that
+    # print the row (a slow drift moves them together and is harmless)
+    win = np.lib.stride_tricks.sliding_window_view(err, passes)
+    return float(np.sqrt(np.mean((win - win.mean(axis=1, keepdims=True)) ** 2)))

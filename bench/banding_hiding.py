@@ -1,0 +1,252 @@
+"""Pass masks designed against the measured machine (issue 36): "nozzle-error hiding".
+
+    .venv/bin/python bench/banding_hiding.py [--machines typical,tired] [--seeds 1,2]
+        [--passes 4] [--out bench/results/banding_hiding.json]
+
+Per machine (docs/physical.md "The machine", drawn from the seed):
+1. the nozzle check is printed on it and scanned at 1200 dpi; every nozzle's dash is
+   measured as `calibrate nozzles` measures it (app/calibrate.py: its centroid through the
+   frame bars' registration, its ink; in a window 4 rows high each side): the nozzle's
+   landing error along the feed (µm, the dash's y less its cell's) and its drop volume (the
+   dash's ink over its colour's median, to the power 3/2: a dot's ink is its area);
+2. `rip.masks.hiding_weights` turns them into each row phase's shares per pass, so that
+   every row's mean error is the colour's mean (the nozzles' errors cancel row by row), held
+   towards equal shares by the error the feed's whole steps leave at each stroke
+   (`rip.masks.stroke_error_um`), which shares per row phase cannot follow;
+   "oracle" does the same from the machine's true errors (the bound of what the measurement
+   could give);
+3. the banding chart is printed at --passes with the checkerboard (today's default), the
+   random mask (the same blue-noise split with equal shares) and the hiding shares, scanned
+   at 600 dpi, and measured by `wideprint quality` (app/quality.py): the mean over the ten
+   tints of the eye-weighted banding, RMS ΔL* at 500 mm.
+
+The shares reach the stroke planner through its pass-mask hook (the planner's selection per
+colour and row phase, rip/swath.py `_pass_mask`): this bench swaps it in for the run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import platform
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from wideprint.app.calibrate import Scan, read_scan_white
+from wideprint.app.cli import main as wideprint
+from wideprint.app.quality import measure_scan
+from wideprint.device_sim.faults import Faults
+from wideprint.device_sim.physical import PhysicalModel
+from wideprint.rip import swath
+from wideprint.rip.masks import hiding_weights, load_bluenoise_mask, stroke_error_um
+from wideprint.rip.profile import load_profile
+from wideprint.rip.testprints import scan_layout
+
+NOZZLE_DPI, NOZZLE_WIDTH_MM, NOZZLE_SCAN_DPI = 150, 200, 1200
+WINDOW_ROWS = 4
+CHART_DPI, CHART_WIDTH_MM, CHART_SCAN_DPI = 300, 100, 600
+_HIDING: dict = {}          # passes -> (4, A, N) shares, while a run prints with them
+
+
+def slots(profile, passes: int) -> np.ndarray:
+    """(4, A, N, 2): the (head, nozzle) that prints colour c's row phase r in pass j
+    (rip/swath.py: slot r + (N - 1 - j) A + s0)."""
+    s0, s1 = profile.usable_slots()
+    a = (s1 - s0) // passes
+    table = profile.slot_table()
+    r = np.arange(a)[:, None]
+    j = np.arange(passes)[None, :]
+    return table[:, r + (passes - 1 - j) * a + s0]
+
+
+def _pass_mask(self, mask):
+    """The planner's selection with the hiding shares per colour (the blue-noise split of
+    the random mask, unequal shares)."""
+    weights = _HIDING.get(self.n)
+    if weights is None or mask != "random":
+        return _ORIGINAL(self, mask)
+    ranks = load_bluenoise_mask()
+    qmask = (ranks.astype(np.int64) * swath.MASK_LEVELS // ranks.size).astype(np.int16)
+    u = (np.arange(swath.MASK_LEVELS) + 0.5) / swath.MASK_LEVELS
+    sel = np.empty((4, self.advance, swath.MASK_LEVELS), np.int16)
+    for c in range(4):
+        cum = np.cumsum(weights[c] / weights[c].sum(axis=1, keepdims=True), axis=1)
+        jsel = np.minimum((u[None, :, None] > cum[:, None, :]).sum(axis=2), self.n - 1)
+        sel[c] = np.take_along_axis(self._remap[c], jsel.astype(np.int64), axis=1)
+    return np.ascontiguousarray(qmask), sel
+
+
+_ORIGINAL = swath.StrokePlanner._pass_mask
+
+
+def _cli(argv: list[str]) -> None:
+    with contextlib.redirect_stdout(io.StringIO()):
+        rc = wideprint(argv)
+    if rc != 0:
+        raise SystemExit(f"wideprint failed ({rc}): {' '.join(argv)}")
+
+
+def whole_step_profile(workdir: str, passes: int) -> str:
+    """The default profile with its feed roller sized so that the weave's advance is a whole
+    number of steps (30.047 mm instead of 30 at 4 passes): no whole-step rounding."""
+    profile = load_profile()
+    s0, s1 = profile.usable_slots()
+    feed = (s1 - s0) // passes * profile.row_um / profile.feed_um_per_step
+    radius = profile.feed.roller_radius_mm * feed / round(feed)
+    text, n = re.subn(r"(?m)^roller_radius_mm\s*=.*$", f"roller_radius_mm = {radius:.6f}",
+                      Path(profile.path).read_text())
+    if n != 1:
+        raise SystemExit(f"{profile.path}: no roller_radius_mm line to change")
+    path = os.path.join(workdir, "whole-step.toml")
+    Path(path).write_text(text)
+    return path
+
+
+def _profile_args() -> list[str]:
+    return ["--profile", PROFILE[0]] if PROFILE else []
+
+
+PROFILE: list[str] = []     # the profile test prints use (--whole-step-feed)
+
+
+def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np.ndarray, np.ndarray]:
+    """(dy µm, volume) per (head, nozzle), from a 1200 dpi scan of the nozzle check."""
+    scan = os.path.join(workdir, f"nc-{machine}-{seed}.tif")
+    _cli(["test-print", "nozzle-check", "--dpi", str(NOZZLE_DPI), "--width-mm", str(NOZZLE_WIDTH_MM),
+          "--scan-out", scan, "--scan-dpi", str(NOZZLE_SCAN_DPI),
+          "--inject", f"machine={machine}", "--inject", f"seed={seed}"] + _profile_args())
+    k = profile.k(NOZZLE_DPI)
+    width = int(round(NOZZLE_WIDTH_MM / 25.4 * profile.counts_per_inch / k))
+    layout = scan_layout("nozzle-check", profile, width, NOZZLE_DPI)
+    dark, white, sdpi = read_scan_white(scan)
+    sc = Scan(dark, sdpi, layout, profile, NOZZLE_DPI, white)
+    shape = (len(profile.heads), profile.nozzles)
+    dy, ink = np.zeros(shape), np.full(shape, np.nan)
+    index = {h.name: h.index for h in profile.heads}
+    for m in layout.marks:
+        # as `calibrate nozzles` measures a dash, in a window 4 rows high each side (the next
+        # dash of its staircase step is 16 rows away): a crooked nozzle's dash stays whole
+        wgt, mx, my = sc.window(m, 0.0, WINDOW_ROWS * sc.row_um, sc.band(m.channel))
+        if wgt.sum() > 0:
+            dy[index[m.head], m.nozzle] = (wgt * my).sum() / wgt.sum() - sc.model_centroid(m)[1]
+            ink[index[m.head], m.nozzle] = wgt.sum()
+    os.unlink(scan)
+    volume = np.ones(shape)
+    for ch in range(4):
+        heads = [h.index for h in profile.heads if h.channel == ch]
+        med = np.nanmedian(ink[heads])
+        volume[heads] = np.nan_to_num((ink[heads] / med) ** 1.5, nan=1.0)
+    # a head's mean y error is its offset (what `calibrate heads` trims); kept: it is the
+    # rows' error too
+    return dy, volume
+
+
+def true_nozzles(machine: str, seed: int, profile) -> tuple[np.ndarray, np.ndarray]:
+    model = PhysicalModel(profile, Faults.parse([f"machine={machine}", f"seed={seed}"]))
+    return model.spread_dy_um.copy(), model.volume.copy()
+
+
+def chart(machine: str, seed: int, passes: int, mask: str, workdir: str) -> dict:
+    scan = os.path.join(workdir, f"chart-{machine}-{seed}-{passes}-{mask}.tif")
+    _cli(["test-print", "banding-scan", "--dpi", str(CHART_DPI), "--passes", str(passes),
+          "--pass-mask", mask, "--width-mm", str(CHART_WIDTH_MM), "--scan-out", scan,
+          "--scan-dpi", str(CHART_SCAN_DPI), "--inject", f"machine={machine}",
+          "--inject", f"seed={seed}"] + _profile_args())
+    rep = measure_scan(scan, passes=passes)
+    os.unlink(scan)
+    return dict(**rep.summary(), tints={q.name: q.banding for q in rep.tints},
+                advance=float(np.mean([q.components[0].amplitude for q in rep.tints])))
+
+
+MASK_NAMES = ("checker", "random", "hiding", "oracle")
+
+
+def run(machine: str, seed: int, passes: int, workdir: str, profile,
+        masks: tuple[str, ...] = MASK_NAMES) -> list[dict]:
+    t0 = time.perf_counter()
+    out = []
+    sl = slots(profile, passes)
+    dy_m, vol_m = measured_nozzles(machine, seed, workdir, profile)
+    dy_t, vol_t = true_nozzles(machine, seed, profile)
+    live = sl[..., 0] >= 0
+    used = (sl[..., 0][live], sl[..., 1][live])
+    err = dict(dy_um=round(float(np.std(dy_m[used] - dy_m[used].mean() - (dy_t[used] - dy_t[used].mean()))), 3),
+               volume_pct=round(float(np.std(vol_m[used] - vol_t[used])) * 100, 3),
+               true_dy_um=round(float(np.std(dy_t[used])), 3),
+               true_volume_pct=round(float(np.std(vol_t[used])) * 100, 3))
+    print(f"{machine} seed {seed}: the nozzle check measures dy within {err['dy_um']} µm "
+          f"(spread {err['true_dy_um']}), volume within {err['volume_pct']} % "
+          f"(spread {err['true_volume_pct']})", flush=True)
+    stroke = stroke_error_um(load_profile(PROFILE[0]) if PROFILE else profile, passes)
+    err["stroke_error_um"] = round(stroke, 3)
+    print(f"  the feed's whole steps leave {stroke:.2f} µm at a stroke", flush=True)
+    shares = dict(hiding=hiding_weights(dy_m, vol_m, sl, stroke_error_um=stroke),
+                  oracle=hiding_weights(dy_t, vol_t, sl, stroke_error_um=stroke))
+    for name in masks:
+        weights = shares.get(name)
+        _HIDING.clear()
+        if weights is not None:
+            _HIDING[passes] = weights
+        try:
+            r = chart(machine, seed, passes, "checker" if name == "checker" else "random", workdir)
+        finally:
+            _HIDING.clear()
+        r.update(machine=machine, seed=seed, passes=passes, mask=name, nozzle_check=err,
+                 whole_step_feed=bool(PROFILE),
+                 sum_w2=None if weights is None else round(float((weights ** 2).sum(axis=2).mean()), 4))
+        out.append(r)
+        print(f"  {name:8s} banding {r['banding']:.3f} (worst {r['banding_max']:.3f}) advance "
+              f"{r['advance']:.3f} grain {r['graininess']:.3f}  {time.perf_counter() - t0:.0f} s",
+              flush=True)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--machines", default="typical,tired")
+    ap.add_argument("--seeds", default="1")
+    ap.add_argument("--passes", type=int, default=4)
+    ap.add_argument("--whole-step-feed", action="store_true",
+                    help="the feed roller sized so that every feed is whole steps (30.047 mm)")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    profile = load_profile()
+    swath.StrokePlanner._pass_mask = _pass_mask
+    runs: list[dict] = []
+    try:
+        with tempfile.TemporaryDirectory(prefix="wideprint-hiding-") as d:
+            if args.whole_step_feed:
+                PROFILE[:] = [whole_step_profile(d, args.passes)]
+            for machine in args.machines.split(","):
+                for seed in (int(s) for s in args.seeds.split(",")):
+                    runs += run(machine, seed, args.passes, d, profile)
+                    if args.out:
+                        Path(args.out).write_text(json.dumps(dict(runs=runs), indent=1) + "\n")
+    finally:
+        swath.StrokePlanner._pass_mask = _ORIGINAL
+    table: dict = {}
+    for r in runs:
+        table.setdefault(f"{r['machine']} {r['passes']} pass", {}).setdefault(r["mask"], []).append(r["banding"])
+    summary = {mode: {m: round(float(np.mean(v)), 4) for m, v in masks.items()} for mode, masks in table.items()}
+    for mode, masks in summary.items():
+        print(mode + ": " + ", ".join(f"{m} {v:.3f} ({v / masks['checker']:.2f}x)" for m, v in masks.items()))
+    if args.out:
+        Path(args.out).write_text(json.dumps(dict(
+            what="banding chart, 300 dpi, 600 dpi scan, eye at 500 mm; shares from a 1200 dpi "
+                 "nozzle-check scan (bench/banding_hiding.py)", machine=platform.machine(),
+            python=sys.version.split()[0], whole_step_feed=args.whole_step_feed, modes=summary,
+            runs=runs),
+            indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
