@@ -48,6 +48,33 @@ def test_a_hot_folder_file_wider_than_the_paper_goes_to_failed_naming_it(tmp_pat
         srv.stop(timeout=5)
 
 
+def test_a_hot_folder_file_the_roll_left_cannot_hold_is_queued_then_held_not_refused(tmp_path):
+    """Not too wide, only longer than the roll left: the file is not lost to failed/ - it
+    is queued and the worker holds it before its first stroke until a new roll is loaded
+    (the API refuses it, the operator there can force it: a hot folder's writer cannot)."""
+    from wideprint.app.client import ApiError, Client
+    srv = inprocess_server(tmp_path / "srv", scan_interval=0.1, settle_s=0.3, start_paused=True)
+    c = Client(srv.state_dir)
+    try:
+        c.roll("main", {"media": "vinyl-300", "length_m": 0.01})
+        with pytest.raises(ApiError) as e:
+            c.submit_bytes(tiny_tiff(), "api.tif")
+        assert e.value.status == 422 and "roll has 0.01 m left" in str(e.value)
+        folder = srv.root / "hot" / "default"
+        (folder / "short.tif").write_bytes(tiny_tiff())
+        [job] = wait_for(lambda: [j for j in srv.jobs() if j["name"] == "short.tif"], 30,
+                         what="short.tif queued")
+        assert not (folder / "failed" / "short.tif.reason.txt").exists()
+        c.pause_queue(False)
+        held = wait_for(lambda: (lambda j: j if j["state"] == "held" else None)(c.job(job["id"])),
+                        30, what="short.tif held")
+        assert "held before printing; load a new roll" in held["message"]
+        assert (folder / "short.tif").exists()                     # waiting with its job
+    finally:
+        c.close()
+        srv.stop(timeout=5)
+
+
 def test_the_cups_backend_cancels_a_job_wider_than_the_paper(tmp_path):
     from test_cups_backend import CANCEL, run_backend, uri_of
     srv = ServerProcess(tmp_path / "state", "--paused")

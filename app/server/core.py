@@ -251,13 +251,14 @@ class PrintServer:
 
     # -- intake -------------------------------------------------------------------------------
     def queue_file(self, src, name: str, size: int, *, exact: bool = False, check=None,
-                   fit: bool = False, **fields) -> tuple[dict, bool]:
+                   fit: bool | str = False, **fields) -> tuple[dict, bool]:
         """Copy a file into the spool and queue it as a job: (job, created).  The copy is
         owned by the job, or deleted before this returns or raises — whatever fails (the
         copy, `check()` after it, the database), no spool file is left without a job.
         A duplicate key returns the job already queued, and its copy is deleted too.
         fit: refuse a job that does not fit the loaded paper unless `force` (Invalid 422
-        naming the file: docs/server.md "Fit before it fails").  hold None: the preset's
+        naming the file: docs/server.md "Fit before it fails"); "width": only one too wide
+        (a hot folder's file the roll left cannot hold is queued, and held before printing).  hold None: the preset's
         default ("Presets")."""
         if fields.get("hold") is None:
             fields["hold"] = self.preset_source.holds(fields.get("preset"))
@@ -267,7 +268,7 @@ class PrintServer:
                 check()
             if fit:
                 self.check_fit(dict(fields, id=None, name=name, spool_path=spool_path,
-                                    sha256=digest, copies_done=0))
+                                    sha256=digest, copies_done=0), width_only=fit == "width")
             # its description beside it, so a lost database can be rebuilt (fsck.py)
             fsck.write_description(spool_path, dict(fields, name=name, size=n, sha256=digest))
             job, created = self.spool.add_job(name=name, spool_path=spool_path, size=n,
@@ -771,13 +772,15 @@ class PrintServer:
                                    width_mm=round(size[0], 1), height_mm=round(size[1], 1)))
         return offers
 
-    def check_fit(self, job: dict) -> None:
+    def check_fit(self, job: dict, width_only: bool = False) -> None:
         """Refuse a job that does not fit the loaded paper (Invalid 422 naming the file and
-        what would make it fit), unless it is forced."""
+        what would make it fit), unless it is forced; width_only: only a job too wide."""
         if job.get("force"):
             return
         fit = self.fit(job)
-        if fit["fits"]:
+        if width_only:                  # the width's problem, in fit()'s words
+            fit = dict(fit, problems=[p for p in fit["problems"] if " mm wide: " in p])
+        if not fit["problems"]:
             return
         offers = "; ".join(f"{o['kind']} ({o['width_mm']:,.0f} x {o['height_mm']:,.0f} mm, "
                            f"settings {json.dumps(o['settings'])})" for o in fit["offers"])

@@ -535,10 +535,11 @@ class HotFolders(threading.Thread):
                     job, _ = self.srv.queue_file(
                         f, name, fst.st_size, check=lambda: _check_same(fd, fst),
                         source=f"hot:{preset}", settings=dict(settings), preset=preset,
-                        client="hot-folder", hot_path=path, fit=True)
+                        client="hot-folder", hot_path=path, fit="width")
                 except Invalid as exc:
-                    # a file that does not fit the paper is refused as the API refuses it,
-                    # in words that name it already (docs/server.md "Fit before it fails")
+                    # a file too wide for the paper is refused as the API refuses it, in
+                    # words that name it already (docs/server.md "Fit before it fails"); one
+                    # the roll left cannot hold is queued: held before printing, never lost
                     why = str(exc) if str(exc).startswith(name) else f"{name}: {exc}"
                     return self._refuse(pfd, preset, name, why, sig)
                 except FileChanged:
