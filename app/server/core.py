@@ -258,8 +258,8 @@ class PrintServer:
         A duplicate key returns the job already queued, and its copy is deleted too.
         fit: refuse a job that does not fit the loaded paper unless `force` (Invalid 422
         naming the file: docs/server.md "Fit before it fails"); "width": only one too wide
-        (a hot folder's file the roll left cannot hold is queued, and held before printing).  hold None: the preset's
-        default ("Presets")."""
+        (a hot folder's file the roll left cannot hold is queued, and held before
+        printing).  hold None: the preset's default ("Presets")."""
         if fields.get("hold") is None:
             fields["hold"] = self.preset_source.holds(fields.get("preset"))
         spool_path, n, digest = self.spool_copy(src, name, size, exact=exact)
