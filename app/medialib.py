@@ -63,8 +63,9 @@ FIELDS: tuple[Field, ...] = (
           "points [in, out] on 0..255, applied after the separation"),
     Field("drop_budget", "table", {}, "dpi mode -> fraction of each ink amount it prints "
           "(docs/color.md); empty: the printer profile's"),
-    Field("modes", "table", {}, "other dpi modes: dpi -> drop_budget, curves, icc and "
-          "profcheck: each mode linearised to the same reference and profiled in its mode"),
+    Field("modes", "table", {}, "other dpi modes: dpi -> drop_budget, curves, icc, "
+          "profcheck and dither: each mode linearised to the same reference and profiled in "
+          "its mode, halftoned by its own dither if it has one (150 dpi: joint)"),
     Field("icc", "str", "profile.icc", "the ICC output profile (in the entry's folder)"),
     Field("measurements", "list", [], "the measurement files it was built from (CGATS "
           ".ti3, in the entry's folder)"),
@@ -112,6 +113,12 @@ class Media:
             lim = float(self.values["channel_limits"].get(ink, 100.0)) / 100.0
             out[ink] = [[float(a), float(b) * lim] for a, b in pts]
         return out
+
+    def dither_for(self, dpi: int | None) -> str:
+        """The halftone of a dpi mode: the mode's own if it has one (a 150 dpi mode made by
+        create: joint, docs/media.md "Every dpi mode the same colour"), else the entry's."""
+        mode = self.values["modes"].get(str(dpi), {}) if dpi is not None else {}
+        return str(mode.get("dither") or self.values["dither"])
 
     def settings_defaults(self) -> dict:
         """The print mode the media was made for, as job settings (rip/settings.py)."""
@@ -279,6 +286,8 @@ def resolve(mapping: dict, profile, library: Path | None = None) -> tuple[Any, d
         raise ValueError(f"media {name!r}: its profile {media.icc_path} is missing")
     given = {k: v for k, v in mapping.items() if v is not None}
     out = {**media.settings_defaults(), **given}
+    if "dither" not in given:
+        out["dither"] = media.dither_for(int(out["dpi"]))
     out.setdefault("output_icc", str(media.icc_for(int(out["dpi"]))))
     return apply_to_profile(media, profile, int(out["dpi"])), out
 

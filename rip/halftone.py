@@ -479,13 +479,13 @@ class Halftoner:
             self._err = np.zeros((channels, 2, width + 2 * _PAD), dtype=np.int32)
         elif method in _KERNELS_5X3:
             self._err = np.zeros((channels, 3, width + 2 * _PAD), dtype=np.int32)
-        elif method == "joint":
-            from .joint import JointDiffuser
-            self._vc = JointDiffuser(width, channels, modulation_noise())
-            self._err = self._vc.err
         elif method in VARIABLE:
             from .diffusion import VCDiffuser
-            self._vc = VCDiffuser(width, channels, modulation_noise(), joint=method == "vector")
+            from .joint import JointDiffuser
+            vc: VCDiffuser | JointDiffuser = (
+                JointDiffuser(width, channels, modulation_noise()) if method == "joint" else
+                VCDiffuser(width, channels, modulation_noise(), joint=method == "vector"))
+            self._vc = vc
             self._err = self._vc.err
             if method == "dbs":
                 from .dbs import RowDBS

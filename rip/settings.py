@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Callable, Iterable, Mapping
 
 # -- the choices (the RIP's modules import these names from here) ------------------------
-METHODS = ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise")   # rip/halftone.py
+METHODS = ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise", "joint")   # rip/halftone.py
 ORDERED = ("bayer", "bluenoise")                                 # screens, not diffusion
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)                                 # rip/swath.py weaves
 PASS_MASKS = ("checker", "random", "feather", "shingle")         # rip/swath.py
@@ -147,12 +147,15 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
             "with threshold modulation, the best for photographs; vector: the same with C and M, "
             "Y and K dots kept apart, the least grain in light mixed colours; dbs: vced's dots "
-            "refined by direct binary search, the least visible error, ~3x the CPU; fs, jarvis, stucki) "
+            "refined by direct binary search, the least visible error, ~3x the CPU; joint: C, M and Y "
+            "decided together, no cell stacked that the coverage does not force, for 150 dpi; "
+            "fs, jarvis, stucki) "
             "or an ordered screen (bluenoise: the fastest, dots of C and M apart; bayer)",
             choices=METHODS, label="Halftone",
             labels={"vced": "Variable-coefficient ED (photo)",
                     "vector": "Colour-aware ED (C/M, Y/K dots apart)",
                     "dbs": "Direct binary search (finest, slower)",
+                    "joint": "Joint C/M/Y ED (dots apart, for 150 dpi)",
                     "fs": "Floyd–Steinberg", "jarvis": "Jarvis–Judice–Ninke", "stucki": "Stucki",
                     "bayer": "Bayer 16×16 (ordered)", "bluenoise": "Blue noise 256 (ordered, fastest)"}),
     Setting("ink_limit", float, None, "total ink limit in percent of one full channel "
@@ -507,6 +510,7 @@ class RipSettings:
     output_icc: str | None = None
     intent: str = "relative"
     band_rows: int = 64          # rows per band: 64 keeps a 40,000 px wide job small
+    spot_dir: str | None = None  # the spot library's folder (a print server's, docs/spot.md); None: the default
     placement: Placement = field(default_factory=Placement)   # physical size by default
 
     def check(self, profile: Any) -> None:
@@ -526,7 +530,7 @@ class RipSettings:
 
 # defaults come from the declarations; a test keeps the dataclasses in step with them
 assert {f.name for f in fields(Placement)} == set(PLACEMENT_KEYS)
-assert {f.name for f in fields(RipSettings)} - {"band_rows", "placement"} == set(RIP_KEYS)
+assert {f.name for f in fields(RipSettings)} - {"band_rows", "spot_dir", "placement"} == set(RIP_KEYS)
 
 
 # -- mappings: requests, presets, saved settings -------------------------------------------

@@ -22,7 +22,8 @@ ORDERED_METHODS = ("bayer", "bluenoise")
 
 
 def test_methods_tuple_is_the_published_interface():
-    assert METHODS == ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise")
+    assert METHODS == ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise",
+                       "joint")
 
 
 def halftone_in_bands(method, img, heights, seed=0):

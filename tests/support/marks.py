@@ -155,6 +155,13 @@ SLOW: dict[str, set[str] | str] = {
         "test_done_or_failed_replaced_by_a_symlink_moves_nothing_outside",  # 1.5
         "test_file_replaced_while_its_job_waits_is_a_new_job",  # 2.5
     },
+    "test_ink150.py": {
+        "test_seamless_across_bands_through_the_rip",  # 10.6 (JIT)
+        "test_k_is_vceds_k_bit_for_bit",  # 4.9 (JIT)
+        "test_150_dpi_joint_is_nearer_300_dpi_at_the_same_ink",  # 2.6
+        "test_tone_exact_on_mixed_tints",  # 1.7
+        "test_a_150_dpi_mode_prints_with_joint_and_300_dpis_ink",  # the media-modes loop
+    },
     "test_ipp.py": {
         "test_ipptool_ipp_everywhere_suite",  # 20.4
         "test_cancel_job_through_ipp_cancels_the_wideprint_job",  # 1.0
