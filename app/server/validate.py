@@ -94,11 +94,14 @@ def rip_settings(settings: dict):
 
 def job_rip_settings(settings: dict, profile, state_dir: Path):
     """(RipSettings, printer profile) a job rips with: its ICC names as paths in STATE/icc,
-    its media (STATE/media, docs/media.md) applied to the settings and the profile."""
+    its media (STATE/media, docs/media.md) applied to the settings and the profile, its
+    spot colours resolved by the server's spot library (STATE/spots, docs/spot.md)."""
+    from dataclasses import replace
+    from ...rip.spot import library_dir
     from ..medialib import resolve, user_dir
     profile, mapping = resolve(with_icc_paths(settings, Path(state_dir) / "icc"), profile,
                                user_dir(state_dir))
-    return rip_settings(mapping), profile
+    return replace(rip_settings(mapping), spot_dir=str(library_dir(state_dir))), profile
 
 
 JOB_KEYS = {"name", "preset", "copies", "priority", "hold", "key", "client", "settings", "printer",
