@@ -33,7 +33,7 @@ The decision, per pixel (``vced``'s arithmetic otherwise: ``rip/diffusion.py``):
   count above is of all four inks: C, M and Y fill the cells K left before stacking on K.
   Measured through the whole media loop (bench/ink150_media.py): with K left out of the count
   (``k_in_count=False``, K stacking on C, M and Y at random) 150 dpi needed 17 % more ink than
-  300 dpi for the control chart; counted, 3 %.
+  300 dpi for the control chart; counted, 6 %.
 
 Serpentine on the absolute row, integer arithmetic, the error rows carried between bands
 (``err``, as ``vced``): the same dots for any band split, any thread split, every run.
