@@ -45,9 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from .compiled import kernel
-from .diffusion import (NEXT_BOOST, PAIR_LIMIT, SPLIT_BOOST, UNIT, WEIGHT_BITS, _step,
-                        coefficient_table, modulation_table, noise_offsets, strength_table,
-                        vc_planes, weight_tables)
+from .diffusion import PAIR_LIMIT, UNIT, WEIGHT_BITS, VCDiffuser, _step, vc_planes
 from .serpentine import _end_row, _serpentine
 
 __all__ = ["JointDiffuser", "cmy_rows", "JOINT"]
@@ -194,37 +192,24 @@ def cmy_rows(src, dst, err, row0, wn, wdl, mod, smod, noise, offs, lim, kc, tab)
             _end_row(ck, nk, p3, width, fwd)
 
 
-class JointDiffuser:
+class JointDiffuser(VCDiffuser):
     """Band-by-band ``joint`` diffusion of (rows, width, channels) uint8 ink: channels 0-2 (C,
-    M, Y) decided together by ``cmy_rows``, the rest (K) each on its own with ``vced``'s
-    arithmetic (``vc_planes``: the same bits as ``vced``'s K).  The interface of
-    ``rip.diffusion.VCDiffuser`` (``jobs``, ``process``, ``err``, ``row``), which
-    rip/halftone.py drives; state carries across bands."""
+    M, Y) decided together by ``cmy_rows``, with K (channel 3) diffused in the same loop as
+    ``vced`` diffuses it and counted in the cell (``k_in_count``; else K on its own,
+    ``vc_planes``, as any further channel).  ``rip.diffusion.VCDiffuser``'s tables, state
+    (``err``, ``row``) and ``process``, which rip/halftone.py drives; only ``jobs`` differs."""
 
     def __init__(self, width: int, channels: int, noise: np.ndarray, *, k_in_count: bool = True):
-        n = noise.shape[0]
-        if noise.ndim != 2 or noise.shape[1] != n or n & (n - 1) or noise.dtype != np.uint8:
-            raise ValueError("noise must be a square uint8 tile whose side is a power of two")
-        self.width, self.channels = int(width), int(channels)
-        self.noise = np.ascontiguousarray(noise)
-        self.offsets = noise_offsets(n, self.channels)
-        self.wn, self.wdl = weight_tables(coefficient_table("zhoufang", NEXT_BOOST))
-        self.mod = modulation_table(strength_table("tuned"))
-        self.smod = np.rint(self.mod * SPLIT_BOOST).astype(np.int64)
-        # vced's per-level table (K's arithmetic, as rip/diffusion.py's VCDiffuser.tab)
-        self.tab = np.ascontiguousarray(np.stack([self.wn, self.wdl, self.mod, self.mod * 0], axis=1))
-        self.err = np.zeros((self.channels, 2, self.width + 4), np.int32)
-        self.row = 0
-        self.joint = JOINT if self.channels >= JOINT else 0
-        # K (channel 3) diffused in the joint loop and counted in the cell's dots
+        super().__init__(width, channels, noise)        # vced's weights, modulation, tab
+        self.inks = JOINT if self.channels >= JOINT else 0
         self.kc = JOINT if k_in_count and self.channels > JOINT else -1
         self.lim = int(PAIR_LIMIT)
 
     def jobs(self, band: np.ndarray, out: np.ndarray, groups: int):
-        """Callables that together diffuse ``band`` into ``out``: C, M and Y in one, the other
-        channels in another (on two threads when ``groups`` > 1), independent of each other."""
+        """Callables that together diffuse ``band`` into ``out``: C, M and Y (and K, counted)
+        in one, the other channels in another (on two threads when ``groups`` > 1)."""
         row0 = self.row
-        rest = (self.joint + (self.kc >= 0), self.channels)
+        rest = (self.inks + (self.kc >= 0), self.channels)
 
         def cmy():
             cmy_rows(band, out, self.err, row0, self.wn, self.wdl, self.mod, self.smod,
@@ -235,17 +220,8 @@ class JointDiffuser:
                 vc_planes(band, out, self.err, row0, rest[0], rest[1], self.wn, self.wdl,
                           self.mod, self.noise, self.offsets)
 
-        if not self.joint:
+        if not self.inks:
             return [others]
         if groups > 1 and rest[1] > rest[0]:
             return [cmy, others]
         return [lambda: (cmy(), others())]
-
-    def process(self, band: np.ndarray) -> np.ndarray:
-        """One band, in the calling thread."""
-        out = np.empty(band.shape, np.uint8)
-        for job in self.jobs(np.ascontiguousarray(band), out, 1):
-            job()
-        self.row += band.shape[0]
-        return out
-

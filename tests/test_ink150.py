@@ -75,26 +75,28 @@ def test_deterministic_thread_independent_and_seamless():
 
 
 def test_seamless_across_bands_through_the_rip(tmp_path, profile):
-    """The same RGB image ripped with bands of 64, 17, 1 and 150 rows: identical dots (the
-    error rows and the modulation phase carry across bands)."""
+    """A CMYK photograph-like file ripped at 150 dpi in bands of 64, 17, 1 and 150 rows:
+    identical planes (the error rows and the modulation phase carry across bands), with
+    every ink and K counted in the cells."""
     import tifffile
     from wideprint.rip.pipeline import RipJob
     from wideprint.rip.settings import Placement, RipSettings
-    rng = np.random.default_rng(4)
-    img = np.clip(rng.normal(128, 60, (150, 133, 3)), 0, 255).astype(np.uint8)
-    img[:, :20] = 255
-    img[40:60] = (90, 120, 60)
-    path = tmp_path / "in.tif"
-    tifffile.imwrite(path, img, photometric="rgb")
-    planes = []
-    for rows in (64, 17, 1, 150):
-        s = RipSettings(dither="joint", dpi=150, placement=Placement(size="pixels"), band_rows=rows)
-        job = RipJob(str(path), s, profile)
-        planes.append(np.concatenate(list(job.halftone_bands())))
-        job.close()
-    assert planes[0][:, :, :3].any()
-    for p in planes[1:]:
-        assert np.array_equal(p, planes[0])
+    ramp = np.linspace(0, 255, 133)[None, :, None] * np.ones((150, 1, 4))
+    noisy = ramp + np.random.default_rng(4).normal(0, 40, ramp.shape)
+    cmyk = np.clip(noisy[:, ::-1] * (0.3, 0.7, 1.0, 0.4), 0, 255)
+    tifffile.imwrite(tmp_path / "in.tif", cmyk.astype(np.uint8), photometric="separated")
+
+    def ripped(rows: int) -> np.ndarray:
+        job = RipJob(str(tmp_path / "in.tif"), RipSettings(
+            dither="joint", dpi=150, band_rows=rows, placement=Placement(size="pixels")), profile)
+        try:
+            return np.concatenate(list(job.halftone_bands()))
+        finally:
+            job.close()
+
+    whole = ripped(150)
+    assert whole.reshape(-1, 4).any(axis=0).all()
+    assert all(np.array_equal(ripped(rows), whole) for rows in (64, 17, 1))
 
 
 def test_extremes_hold_whatever_the_error():
