@@ -50,7 +50,7 @@ from .serpentine import _end_row, _serpentine
 
 __all__ = ["JointDiffuser", "cmy_rows", "JOINT"]
 
-#: the inks decided together (C, M, Y); the others (K) each on its own
+#: the inks decided together (C, M, Y); K (the next) keeps vced's dots, counted in the cell
 JOINT = 3
 
 _U = UNIT
