@@ -14,6 +14,7 @@ import numpy as np
 import pikepdf
 import pytest
 
+from support.printcut import cut_box_mm, printed_box_mm, settings_for
 from wideprint.app import api
 from wideprint.rip.cutfile import read_dxf, read_hpgl
 from wideprint.rip.cutnames import is_cut_name
@@ -296,30 +297,8 @@ def test_print_server_keeps_the_cut_files_with_the_job(decal, print_server):
         c.close()
 
 
-# -- the extraction's graphics state, documents and layouts (no printing: Ghostscript renders) --
-def settings_for(dpi=300, **placement):
-    from wideprint.rip.settings import Placement, RipSettings
-    return RipSettings(dpi=dpi, placement=Placement(**placement))
-
-
-def printed_box_mm(path: Path, st) -> tuple[float, float, float, float]:
-    """The K ink's bounding box as Ghostscript renders the document for the job, mm."""
-    from wideprint.rip.document import open_document
-    from wideprint.rip.inputs import sniff_input
-    with open_document(str(path), sniff_input(str(path)), st, load_profile()) as doc:
-        k = np.concatenate(list(doc.bands(256)))[..., 3] > 127
-    ys, xs = np.nonzero(k)
-    col, row = 25.4 / st.dpi, ROW_UM / 1000
-    return xs.min() * col, ys.min() * row, (xs.max() + 1) * col, (ys.max() + 1) * row
-
-
-def cut_box_mm(path: Path, st) -> tuple[float, float, float, float]:
-    from wideprint.rip.cut import cut_job
-    job = cut_job(str(path), st, load_profile())
-    pts = np.vstack([p.points for p in job.paths])
-    return pts[:, 0].min(), pts[:, 1].min(), pts[:, 0].max(), pts[:, 1].max()
-
-
+# -- the extraction's graphics state, documents and layouts (no printing: Ghostscript renders;
+# settings_for, printed_box_mm, cut_box_mm: tests/support/printcut.py) --
 def test_devicen_tints_and_painting_operators(tmp_path):
     """A DeviceN with a cut component cuts only where that component's tint is above 0;
     `B` in the cut colour is one path; `n` paints nothing; a device colour after the spot

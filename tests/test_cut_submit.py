@@ -4,7 +4,7 @@ or DXF by the name; a job with no cut path is an error, not an empty file."""
 
 import numpy as np
 import pikepdf
-from test_spot import make_pdf
+from support.printcut import make_pdf
 
 from wideprint.app.cli import main
 from wideprint.app.client import Client

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pikepdf
-from test_cut import cut_box_mm, printed_box_mm, settings_for
+from support.printcut import cut_box_mm, printed_box_mm, settings_for
 
 from wideprint.rip.cut import cut_job
 from wideprint.rip.document import open_document

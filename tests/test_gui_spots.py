@@ -11,7 +11,7 @@ pytest.importorskip("PySide6")
 pytest.importorskip("pytestqt")
 
 from support.gui import LONG, Server, open_window  # noqa: E402
-from test_spot import BRAND, make_pdf  # noqa: E402
+from support.printcut import BRAND, make_pdf  # noqa: E402
 from wideprint.app.gui.preview import lab_to_srgb  # noqa: E402
 from wideprint.rip import spot  # noqa: E402
 

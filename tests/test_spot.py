@@ -9,6 +9,7 @@ import numpy as np
 import pikepdf
 import pytest
 
+from support.printcut import BRAND, CUT_Y_PT, H_PT, PT, RECTS, W_PT, make_pdf
 from wideprint.app.cli import main
 from wideprint.device_sim.spectral import delta_e2000 as de2000_spectral
 from wideprint.device_sim.spectro import measure_patches
@@ -21,10 +22,7 @@ from wideprint.rip.settings import RipSettings
 from wideprint.rip.spot_pdf import spot_names
 
 ROOT = Path(__file__).resolve().parent.parent
-PT = 25.4 / 72                                  # mm per point
 
-# two brand colours inside vinyl-300's gamut, as a brand book gives them (D50, 2°)
-BRAND = {"Brand Red": (48.0, 62.0, 38.0), "Brand Teal": (55.0, -35.0, -12.0)}
 # a CxF3 file as X-Rite's tools write it (namespace prefix, a spectral-only object too)
 XRITE_CXF = b"""<?xml version="1.0" encoding="UTF-8"?>
 <cc:CxF xmlns:cc="http://colorexchangeformat.com/CxF3-core">
@@ -154,43 +152,6 @@ def test_spot_colour_math_agrees_with_the_emulators_de2000():
     b = a + rng.normal(0, 4, a.shape)
     # libvips computes in float32; one pair sits near the hue mean's branch (0.007 apart)
     np.testing.assert_allclose(spot.delta_e2000(a, b), de2000_spectral(a, b), atol=0.01)
-
-
-# -- a PDF with spots ---------------------------------------------------------------------------
-W_PT, H_PT = 216, 144          # 3 x 2 in
-# the spots' rectangles (x, y, w, h in points from the lower left), over a background that
-# fills y 0..68; the CutContour lines, 3 mm wide, run x 20..196 at y 40 (over the
-# background and the spots) and at y 110 (over blank paper)
-RECTS = {"Brand Red": (10, 10, 60, 50), "Brand Teal": (78, 10, 60, 50), "Other Green": (146, 10, 60, 50)}
-CUT_Y_PT = 40
-
-
-def make_pdf(path: Path, cut_width_mm: float = 3.0) -> Path:
-    """Two library spots (a Separation with a Lab alternate, one with a CMYK alternate), a
-    spot in no library, and CutContour strokes 3 mm wide, over a 20 % CMYK background."""
-    pdf = pikepdf.new()
-    page = pdf.add_blank_page(page_size=(W_PT, H_PT))
-    lab = pikepdf.Array([pikepdf.Name.Lab, pikepdf.Dictionary(WhitePoint=[0.9642, 1, 0.8249],
-                                                               Range=[-128, 127, -128, 127])])
-
-    def sep(name, alt, c0, c1):
-        fn = pikepdf.Dictionary(FunctionType=2, Domain=[0, 1], C0=c0, C1=c1, N=1)
-        return pikepdf.Array([pikepdf.Name.Separation, pikepdf.Name("/" + name), alt, fn])
-    cmyk = pikepdf.Name.DeviceCMYK
-    page.Resources = pikepdf.Dictionary(ColorSpace=pikepdf.Dictionary(
-        CS0=sep("Brand Red", lab, [100, 0, 0], [48, 62, 38]),
-        CS1=sep("Brand Teal", cmyk, [0, 0, 0, 0], [0.8, 0, 0.3, 0]),     # the designer's guess
-        CS2=sep("Other Green", cmyk, [0, 0, 0, 0], [0.7, 0, 1, 0]),
-        CS3=sep("CutContour", cmyk, [0, 0, 0, 0], [0, 1, 0, 0])))
-    w = cut_width_mm / PT
-    body = [f"0.2 0.2 0.2 0.2 k 0 0 {W_PT} {H_PT - 76} re f"]        # background: lower part
-    for i, (x, y, rw, rh) in enumerate(RECTS.values()):
-        body.append(f"/CS{i} cs 1 scn {x} {y} {rw} {rh} re f")
-    body.append(f"/CS3 CS 1 SCN {w:.4f} w 1 J 20 {CUT_Y_PT + 70} m 196 {CUT_Y_PT + 70} l S")
-    body.append(f"/CS3 CS 1 SCN {w:.4f} w 20 {CUT_Y_PT} m 196 {CUT_Y_PT} l S")
-    page.Contents = pdf.make_stream("\n".join(body).encode())
-    pdf.save(path)
-    return path
 
 
 def _raster(path, settings=None) -> tuple[np.ndarray, list]:

@@ -9,8 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from test_spot import BRAND, make_pdf
-
+from support.printcut import BRAND, make_pdf
 from support.server import wait_for
 from wideprint.app.client import Client
 from wideprint.rip import spot

@@ -9,6 +9,7 @@ Nothing here is part of the wideprint package.
 - background: long single-threaded computations run at the lowest priority
 - marks: which tests are slow, system or gui
 - cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree
+- printcut: a PDF with brand spots and CutContour lines; where cut paths and ink land
 - private_cups, private_mdns: a private cupsd and `serve --ipp`; avahi in private namespaces
 - corpus: hand-made BMPs and minimal headers, the hostile corpus of broken files
 - rtl_encode: an HP RTL writer of the tests' own, independent of rip/rtl.py"""
