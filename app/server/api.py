@@ -352,8 +352,9 @@ class ApiHandler(BaseHTTPRequestHandler):
         """Server-sent events (text/event-stream, docs/server.md "Live state"): the state of
         the printers (`printers`: state, fault, current job and its telemetry), of the
         jobs not finished (`jobs`) and a mark of the ended ones (`ended`), each sent when
-        it changes, checked 5 times a second on the server; a comment every 15 s keeps the connection alive.  One stream replaces a
-        client's polling.  `?max_s=N` ends the stream after N seconds (tests, scripts)."""
+        it changes, checked 5 times a second on the server; a comment every 15 s keeps the
+        connection alive.  One stream replaces a client's polling.  `?max_s=N` ends the
+        stream after N seconds (tests, scripts)."""
         import time as _time
         srv = self.srv
         self.close_connection = True
