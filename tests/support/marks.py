@@ -188,6 +188,13 @@ SLOW: dict[str, set[str] | str] = {
         "test_pages_follow_each_other_with_their_cut_paths",  # 5.4
         "test_skew_turns_the_print_on_the_scan_and_leaves_the_media",  # 15
     },
+    "test_cut_submit.py": {
+        "test_submit_writes_the_jobs_cut_files",  # 3.1
+        "test_submit_cut_out_refuses_a_job_without_cut_paths",  # 1.2
+    },
+    "test_cut_text.py": {
+        "test_text_in_a_cut_colour_is_cut_along_its_glyphs",  # 4.6
+    },
     "test_layout.py": {
         "test_cli_nests_different_images_in_one_job_and_reports_the_media_saved",  # 1.0
         "test_registration_marks_and_label_lie_outside_the_image",  # 1.2
@@ -311,6 +318,13 @@ SLOW: dict[str, set[str] | str] = {
         "test_swatch_book_round_trip",  # 0.8
         "test_cli_import_export_round_trip_and_name_matching",  # 0.8
         "test_resolution_through_the_media_profile_reports_the_gamut",  # 0.7
+    },
+    "test_spot_devicen.py": {
+        "test_a_devicen_mixing_a_library_colour_with_an_unknown_one",  # 2.1
+    },
+    "test_spot_server.py": {
+        "test_ripped_ahead_and_layout_jobs_record_their_spots",  # 3.2
+        "test_a_printed_job_records_its_spots_from_the_servers_state_dir",  # 1.0
     },
     "test_standalone.py": ALL,  # 4 s in all
     "test_state_dir.py": {
