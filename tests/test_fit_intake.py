@@ -76,7 +76,7 @@ def test_a_hot_folder_file_the_roll_left_cannot_hold_is_queued_then_held_not_ref
 
 
 def test_the_cups_backend_cancels_a_job_wider_than_the_paper(tmp_path):
-    from test_cups_backend import CANCEL, run_backend, uri_of
+    from support.cups_backend import CANCEL, run_backend, uri_of
     srv = ServerProcess(tmp_path / "state", "--paused")
     try:
         r = run_backend(uri_of(srv.state), file=wide_tiff(tmp_path / "in.tif"),
@@ -92,7 +92,7 @@ def test_the_cups_backend_cancels_a_job_wider_than_the_paper(tmp_path):
 @pytest.mark.timeout(300)
 def test_an_ipp_print_job_wider_than_the_paper_ends_aborted_naming_it(tmp_path):
     from support.private_cups import IppServe
-    from test_ipp import BINARY, print_job, wait_ipp_job
+    from support.ipp import BINARY, print_job, wait_ipp_job
     if BINARY is None:
         pytest.fail("the Printer Application is not built (make app/ipp/wideprint-ipp)")
     (tmp_path / "ipp").mkdir()

@@ -109,7 +109,7 @@ def test_the_printer_card_shows_the_warning_in_amber_and_a_fault_first(qtbot):
 @pytest.mark.timeout(300)
 def test_ipp_says_media_low_as_a_warning_the_printer_goes_on(tmp_path):
     from support.private_cups import IppServe
-    from test_ipp import IPPTOOL_DIR, BINARY, attrs, ipptool
+    from support.ipp import BINARY, IPPTOOL_DIR, attrs, ipptool
     if BINARY is None:
         pytest.fail("the Printer Application is not built (make app/ipp/wideprint-ipp)")
     (tmp_path / "ipp").mkdir()
@@ -146,7 +146,7 @@ def test_ipp_says_media_low_as_a_warning_the_printer_goes_on(tmp_path):
 def test_the_web_page_shows_the_warning_on_the_printers_card(tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
-    from test_web import chromium
+    from support.web import chromium
     from wideprint.app.server import PrintServer, ServerConfig
     srv = PrintServer(ServerConfig(device="emulator", state_dir=tmp_path / "state", port=0,
                                    start_paused=True))

@@ -11,5 +11,7 @@ Nothing here is part of the wideprint package.
 - cups, cutter, packaging: CUPS's conversions, a camera cutter, the installed tree
 - printcut: a PDF with brand spots and CutContour lines; where cut paths and ink land
 - private_cups, private_mdns: a private cupsd and `serve --ipp`; avahi in private namespaces
+- ipp, cups_backend, web: ipptool against the Printer Application, the CUPS backend run as
+  cupsd runs it, the web page in headless chromium
 - corpus: hand-made BMPs and minimal headers, the hostile corpus of broken files
 - rtl_encode: an HP RTL writer of the tests' own, independent of rip/rtl.py"""
