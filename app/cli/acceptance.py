@@ -17,7 +17,8 @@ def cmd_acceptance(args) -> int:
     except ImportError:
         print("wideprint acceptance: needs pytest (pip install 'wideprint[test]')", file=sys.stderr)
         return EXIT_USAGE
-    suite = args.suite or str(Path(__file__).resolve().parent.parent / "resources" / "acceptance")
+    # app/cli/ -> the package root, whose resources/ ships the sample suite
+    suite = args.suite or str(Path(__file__).resolve().parents[2] / "resources" / "acceptance")
     argv = [suite, "-q", "-p", "no:cacheprovider", f"--wideprint-device={args.device}"]
     if args.junit_xml:
         argv.append(f"--junit-xml={args.junit_xml}")
