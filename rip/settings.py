@@ -147,7 +147,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
             "with threshold modulation, the best for photographs; vector: the same with C and M, "
             "Y and K dots kept apart, the least grain in light mixed colours; dbs: vced's dots "
-            "refined by direct binary search, the least visible error, ~3x the CPU; joint: C, M and Y "
+            "refined by direct binary search, the least visible error, ~2.4x the CPU; joint: C, M and Y "
             "decided together, no cell stacked that the coverage does not force, for 150 dpi; "
             "fs, jarvis, stucki) "
             "or an ordered screen (bluenoise: the fastest, dots of C and M apart; bayer)",
