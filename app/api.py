@@ -280,7 +280,8 @@ def run_job(device: Any, rip_job: Any, job_id: int, *, on_event: Callable[..., A
     report = dict(pj.report.as_dict(), state=state, message=message or pj.report.message)
     if getattr(rip_job, "layout", None) is not None:      # docs/layout.md: media saved
         report["layout"] = rip_job.layout.report
-    spots = getattr(getattr(rip_job, "source", None), "spots", None)
+    from ..rip.spot_render import job_spots
+    spots = job_spots(rip_job)               # a layout's (print and cut, nesting) too
     if spots:                                # docs/spot.md: the spots and how each printed
         report["spots"] = spots
     if device.emulator is not None:
