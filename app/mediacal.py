@@ -344,9 +344,9 @@ def scan_lab(path: Path, rects: list, bars: list | None, scanner_icc: Path | Non
         raise ValueError(f"{path}: a scan needs the scanner's input profile (--scanner-icc)")
     with tifffile.TiffFile(path) as tif:
         page = tif.pages.first
-        res, unit = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
+        res, unit_tag = page.tags.get("XResolution"), page.tags.get("ResolutionUnit")
         samples, dtype = page.samplesperpixel, page.dtype
-    unit = int(unit.value) if unit is not None else 2          # TIFF: inch unless said
+    unit = int(unit_tag.value) if unit_tag is not None else 2  # TIFF: inch unless said
     dpi = res.value[0] / res.value[1] * (2.54 if unit == 3 else 1.0) if res and unit != 1 else 0
     if not 50 <= dpi <= 9600:           # unit 1 (none), tifffile's default, is no dpi either
         raise ValueError(f"{path}: the scan says no resolution; save it with its dpi")
