@@ -430,9 +430,14 @@ def test_the_roll_on_the_card_and_a_job_it_cannot_hold_is_held(qtbot, shop_win, 
     assert "vinyl-300" in [dlg.media.itemText(i) for i in range(dlg.media.count())]
     dlg.media.setCurrentText("vinyl-300")
     dlg.length.setValue(12.5)
+    assert dlg.spare.value() == 1.0                              # the server's default spare
+    dlg.spare.setValue(2.5)
     shop_win.load_roll("main", dlg.body())
     card = shop_win.printers_panel.cards["main"]
     qtbot.waitUntil(lambda: "vinyl-300, 12.50 m left" in card.telemetry.text(), timeout=20_000)
+    assert shop.client.roll("main")["roll"]["spare_m"] == 2.5    # the warning's spare, as set
+    again = RollDialog("main", shop.client.roll("main")["roll"], shop.state, shop_win)
+    assert again.spare.value() == 2.5                            # the loaded roll's own
     a, _ = image(tmp_path, "long-banner.tif", 74, rows=300, cols=100)
     job = shop.client.submit(a)["job"]                # fits the roll at submission
     shop_win.load_roll("main", {"remaining_m": 0.02})        # measured: 20 mm left

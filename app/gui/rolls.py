@@ -1,6 +1,7 @@
 """The roll dialog (docs/gui.md "Rolls"): what the operator loads on a printer - the media
 (a name of the media library, app/medialib.py: the server's STATE/media, then the shipped
-entries), its length as entered or the roll's label as read; the width comes from the
+entries), its length as entered or the roll's label as read, and how much to spare before the
+roll-low warning; the width comes from the
 printer's paper sensor.  The server keeps the roll and counts every feed off it
 (docs/server.md "Rolls")."""
 
@@ -50,6 +51,16 @@ class RollDialog(QDialog):
         self.label.setObjectName("roll_label")
         self.label.setPlaceholderText("or the roll's label: media=vinyl-300 length=50m")
         f.addRow("Label:", self.label)
+        # the roll-low warning comes when the jobs need more than what is left less this
+        # (docs/server.md "Rolls: the warning"); the roll's own, else the server's default
+        self.spare = QDoubleSpinBox()
+        self.spare.setObjectName("roll_spare")
+        self.spare.setRange(0.0, 1000.0)
+        self.spare.setDecimals(1)
+        self.spare.setSuffix(" m")
+        self.spare.setValue(float(roll.get("spare_m", 1.0)) if roll is not None else 1.0)
+        self.spare.setToolTip("Warn before a job would run off the roll with this much to spare")
+        f.addRow("Warn with:", self.spare)
         buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok |
                                    QDialogButtonBox.StandardButton.Cancel)
         buttons.accepted.connect(self.accept)
@@ -58,9 +69,10 @@ class RollDialog(QDialog):
 
     def body(self) -> dict:
         """The API's body for the roll loaded (POST /v1/printers/NAME/roll)."""
+        spare = round(self.spare.value(), 1)
         if self.label.text().strip():
-            return {"label": self.label.text().strip()}
-        out: dict = {"media": self.media.currentText().strip()}
+            return {"label": self.label.text().strip(), "spare_m": spare}
+        out: dict = {"media": self.media.currentText().strip(), "spare_m": spare}
         if self.length.value() > 0:
             out["length_m"] = round(self.length.value(), 3)
         return out
