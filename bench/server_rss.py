@@ -70,7 +70,7 @@ def get(port: int, token: str, path: str) -> bytes:
     return data
 
 
-def run(minutes: float, out: Path | None, frames: int) -> dict:
+def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from tests.support.server import inprocess_server
 
@@ -93,7 +93,7 @@ def run(minutes: float, out: Path | None, frames: int) -> dict:
     def sample(label: str) -> dict:
         nonlocal base
         gc.collect()
-        if not tracemalloc.is_tracing() and time.monotonic() - t0 >= 50:
+        if frames and not tracemalloc.is_tracing() and time.monotonic() - t0 >= 50:
             tracemalloc.start(frames)        # not from the start: numba's JIT and the first
             #                                  jobs under tracing would take minutes
         snap = tracemalloc.take_snapshot().filter_traces(
@@ -106,6 +106,9 @@ def run(minutes: float, out: Path | None, frames: int) -> dict:
                  sqlite_connections=conns,
                  threads=threading.active_count(), submitted=submitted, errors=errors,
                  **mallinfo())
+        if trim_each:                        # is the rise returned to the system?
+            _libc.malloc_trim(0)
+            s["rss_after_trim_mb"] = rss_mb()
         if snap is None:
             pass
         elif base is None and s["t"] >= 110:     # after the warm-up the soak saw (73 -> 282 MB)
@@ -160,7 +163,7 @@ def run(minutes: float, out: Path | None, frames: int) -> dict:
     span = (runs[-1]["t"] - runs[0]["t"]) / 60 if len(runs) > 1 else None
     res = dict(minutes=minutes, malloc_env={k: v for k, v in os.environ.items()
                                             if k.startswith("MALLOC_")},
-               tracemalloc_frames=frames, submitted=submitted, jobs=done, errors=errors,
+               tracemalloc_frames=frames, trim_each=trim_each, submitted=submitted, jobs=done, errors=errors,
                growth_after_2min=dict(
                    minutes=span,
                    rss_mb=round(runs[-1]["rss_mb"] - runs[0]["rss_mb"], 1) if span else None,
@@ -178,10 +181,12 @@ def run(minutes: float, out: Path | None, frames: int) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--minutes", type=float, default=12.0)
-    ap.add_argument("--frames", type=int, default=8, help="tracemalloc traceback depth")
+    ap.add_argument("--frames", type=int, default=8,
+                    help="tracemalloc traceback depth (0: no tracemalloc)")
+    ap.add_argument("--trim-each", action="store_true", help="malloc_trim(0) after each sample")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    res = run(a.minutes, a.out, a.frames)
+    res = run(a.minutes, a.out, a.frames, a.trim_each)
     print(json.dumps({k: v for k, v in res.items() if k != "samples"}, indent=1))
     return 0
 
