@@ -200,6 +200,21 @@ def make_images(folder: Path) -> list[Path]:
     return out
 
 
+def feed(feeder, images: list[Path], rng: random.Random) -> list[dict]:
+    """Keep three jobs waiting on each of the two printers, as a busy shop does: each new one
+    a random image, 1-3 copies, 1, 2 or 4 passes.  The server's answers to the submits."""
+    jobs = feeder.jobs()
+    answers = []
+    for printer in ("left", "right"):
+        waiting = [j for j in jobs if j.get("printer") == printer
+                   and j["state"] in ("queued", "held", "printing")]
+        if len(waiting) < 3:
+            answers.append(feeder.submit(rng.choice(images), printer=printer,
+                                         copies=rng.randint(1, 3),
+                                         settings={"passes": rng.choice([1, 2, 4])}))
+    return answers
+
+
 def start_server(root: Path):
     from wideprint.app.client import Client
     state = root / "state"
@@ -281,14 +296,7 @@ def run(minutes: float, replay_hz: float, out: Path | None, keep: Path | None = 
     try:
         while child_proc.poll() is None:
             try:
-                jobs = feeder.jobs()
-                for printer in ("left", "right"):
-                    waiting = [j for j in jobs if j.get("printer") == printer
-                               and j["state"] in ("queued", "held", "printing")]
-                    if len(waiting) < 3:
-                        feeder.submit(rng.choice(images), printer=printer, copies=rng.randint(1, 3),
-                                      settings={"passes": rng.choice([1, 2, 4])})
-                        submitted += 1
+                submitted += len(feed(feeder, images, rng))
             except Exception as exc:  # noqa: BLE001 - keep feeding; note it
                 print(f"feeder: {exc}", file=sys.stderr)
             if time.monotonic() >= next_rss:

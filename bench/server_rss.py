@@ -37,7 +37,7 @@ import tracemalloc
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from gui_soak import make_images, rss_mb  # noqa: E402
+from gui_soak import feed, make_images, rss_mb  # noqa: E402
 
 _libc = ctypes.CDLL("libc.so.6")
 
@@ -125,18 +125,11 @@ def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) 
     try:
         while time.monotonic() - t0 < minutes * 60:
             try:
-                jobs = feeder.jobs()
-                for printer in ("left", "right"):
-                    waiting = [j for j in jobs if j.get("printer") == printer
-                               and j["state"] in ("queued", "held", "printing")]
-                    if len(waiting) < 3:
-                        j = feeder.submit(rng.choice(images), printer=printer,
-                                          copies=rng.randint(1, 3),
-                                          settings={"passes": rng.choice([1, 2, 4])})
-                        submitted += 1
-                        jid = j.get("id") or j.get("job", {}).get("id")
-                        if jid:
-                            recent = (recent + [jid])[-6:]
+                for j in feed(feeder, images, rng):
+                    submitted += 1
+                    jid = j.get("id") or j.get("job", {}).get("id")
+                    if jid:
+                        recent = (recent + [jid])[-6:]
                 # the GUI's pollers: status, printers, the recent jobs' previews
                 get(srv.port, srv.token, "/v1/status")
                 get(srv.port, srv.token, "/v1/printers")
