@@ -19,7 +19,8 @@ import pytest
 import tifffile
 
 from support.images import random_planes, write_cmyk_tiff
-from support.ipp import BINARY, IPPTOOL_DIR, PRINT_JOB, attrs, ipptool, print_job, wait_ipp_job
+from support.ipp import (BINARY, IPPTOOL_DIR, PRINT_JOB, attrs, ipptool, job_operation, print_job,
+                         wait_ipp_job)
 from support.private_cups import IppServe, assert_bit_exact, free_port, wait_job
 from wideprint.app.api import rip
 from wideprint.rip.planes import read_planes
@@ -429,20 +430,7 @@ def test_cancel_job_through_ipp_cancels_the_wideprint_job(ipp, tmp_path):
             break
         time.sleep(0.05)
     assert jobs, "the job never printed"
-    test = tmp_path / "cancel.test"
-    test.write_text("""{
-  NAME "Cancel-Job"
-  OPERATION Cancel-Job
-  GROUP operation-attributes-tag
-  ATTR charset attributes-charset utf-8
-  ATTR naturalLanguage attributes-natural-language en
-  ATTR uri printer-uri $uri
-  ATTR integer job-id $job_id
-  ATTR name requesting-user-name tester
-  STATUS successful-ok
-}
-""")
-    assert ipptool(ipp.auth_uri["left"], test, "-d", f"job_id={a['job-id']}")["Tests"][0]["Successful"]
+    assert job_operation(ipp.auth_uri["left"], "Cancel-Job", a["job-id"], tmp_path)["Successful"]
     job = wait_job(ipp.client, "long.tif")
     assert job["state"] == "cancelled" and job["strokes_done"] < job["strokes_total"]
     assert wait_ipp_job(ipp.auth_uri["left"], a["job-id"], tmp_path)["job-state"] == 7

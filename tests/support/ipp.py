@@ -60,11 +60,9 @@ def print_job(tmp: Path, uri: str, path: Path, fmt: str, name: str, job_attrs: s
     return attrs(t)
 
 
-def ipp_job_state(uri: str, job_id: int, tmp: Path) -> dict:
-    test = tmp / "gja.test"
-    test.write_text("""{
-  NAME "Get-Job-Attributes"
-  OPERATION Get-Job-Attributes
+JOB_OPERATION = """{
+  NAME "%(op)s"
+  OPERATION %(op)s
   GROUP operation-attributes-tag
   ATTR charset attributes-charset utf-8
   ATTR naturalLanguage attributes-natural-language en
@@ -73,8 +71,19 @@ def ipp_job_state(uri: str, job_id: int, tmp: Path) -> dict:
   ATTR name requesting-user-name tester
   STATUS successful-ok
 }
-""")
-    return attrs(ipptool(uri, test, "-d", f"job_id={job_id}")["Tests"][0])
+"""
+
+
+def job_operation(uri: str, op: str, job_id: int, tmp: Path) -> dict:
+    """An operation on one job (Get-Job-Attributes, Cancel-Job, ...) expecting
+    successful-ok: ipptool's test result."""
+    test = tmp / f"{op.lower()}.test"
+    test.write_text(JOB_OPERATION % {"op": op})
+    return ipptool(uri, test, "-d", f"job_id={job_id}")["Tests"][0]
+
+
+def ipp_job_state(uri: str, job_id: int, tmp: Path) -> dict:
+    return attrs(job_operation(uri, "Get-Job-Attributes", job_id, tmp))
 
 
 def wait_ipp_job(uri: str, job_id: int, tmp: Path, timeout: float = 120) -> dict:
