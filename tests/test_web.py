@@ -255,8 +255,12 @@ def test_the_page_in_chromium_signs_in_follows_live_holds_releases_and_prints(sh
         assert "paused" in cards[0].text
         assert "vinyl-300" in cards[0].text and "50.0 m left" in cards[0].text, cards[0].text
         assert "vinyl-300" not in cards[1].text              # no roll known on the right one
-        row = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, f"#queue tr[data-job='{first['id']}']"))
-        assert "shop-banner.tif" in row.text and row.get_attribute("data-state") == "queued"
+        # the row's text and state read at once: every `jobs` event draws the queue's rows
+        # anew, so an element found before it may be gone when read (stale)
+        text, state = wait.until(lambda d: d.execute_script(
+            "const r = document.querySelector(arguments[0]); return r && [r.innerText, r.dataset.state]",
+            f"#queue tr[data-job='{first['id']}']"))
+        assert "shop-banner.tif" in text and state == "queued"
         # a job submitted behind the page's back appears live (the event stream, no reload)
         second = client.submit(banner(tmp_path / "second.tif", 450, 150),
                                name="<i>second.tif")["job"]
