@@ -14,9 +14,13 @@ minute records:
 - glibc's view (mallinfo2: arena bytes, in use, free) and, at the end, RSS before and after
   `malloc_trim(0)`.
 
-Run it with MALLOC_ARENA_MAX=2 in the environment for the arena experiment.
+The process is set up as `wideprint serve` sets itself up (app/cli/process.py: mmap
+threshold 4 MiB, two arenas, trim threshold 32 MiB) unless --raw-malloc; the server trims the
+C heap after each job (app/server/heap.py) unless --no-job-trim.  --idle-after M stops
+feeding after M minutes (the pollers go on): a rise that stops with the jobs is per job, not
+per minute.
 
-    python bench/server_rss.py --minutes 12 --out bench/results/server_rss.json
+    python bench/server_rss.py --minutes 60 --frames 0 --idle-after 50 --out OUT.json
 """
 
 from __future__ import annotations
@@ -70,9 +74,17 @@ def get(port: int, token: str, path: str) -> bytes:
     return data
 
 
-def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) -> dict:
+def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False,
+        shipped: bool = True, job_trim: bool = True, idle_after: float | None = None) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from tests.support.server import inprocess_server
+
+    from wideprint.app.server import heap
+    if shipped:                              # as `wideprint serve` sets up its process
+        from wideprint.app.cli.process import _give_back_big_buffers
+        _give_back_big_buffers()
+    if not job_trim:
+        heap._trim = None
 
     from wideprint.app.client import Client
     from wideprint.app.server.config import PrinterConfig
@@ -100,6 +112,8 @@ def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) 
             [tracemalloc.Filter(False, tracemalloc.__file__)]) if tracemalloc.is_tracing() else None
         cur, _ = tracemalloc.get_traced_memory()
         conns = sum(1 for o in gc.get_objects() if type(o) is sqlite3.Connection)
+        if idle_after is not None and time.monotonic() - t0 >= idle_after * 60:
+            label = "idle"
         s = dict(t=round(time.monotonic() - t0, 1), label=label, rss_mb=rss_mb(),
                  traced_mb=round(cur / 2**20, 2),
                  tracemalloc_own_mb=round(tracemalloc.get_tracemalloc_memory() / 2**20, 2),
@@ -124,8 +138,9 @@ def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) 
 
     try:
         while time.monotonic() - t0 < minutes * 60:
+            feeding = idle_after is None or time.monotonic() - t0 < idle_after * 60
             try:
-                for j in feed(feeder, images, rng):
+                for j in (feed(feeder, images, rng) if feeding else ()):
                     submitted += 1
                     jid = j.get("id") or j.get("job", {}).get("id")
                     if jid:
@@ -154,7 +169,8 @@ def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False) 
         srv.stop(timeout=10)
     runs = [s for s in samples if s["t"] >= 120]
     span = (runs[-1]["t"] - runs[0]["t"]) / 60 if len(runs) > 1 else None
-    res = dict(minutes=minutes, malloc_env={k: v for k, v in os.environ.items()
+    res = dict(minutes=minutes, shipped_process=shipped, job_trim=job_trim,
+               idle_after=idle_after, malloc_env={k: v for k, v in os.environ.items()
                                             if k.startswith("MALLOC_")},
                tracemalloc_frames=frames, trim_each=trim_each, submitted=submitted, jobs=done, errors=errors,
                growth_after_2min=dict(
@@ -177,9 +193,15 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=8,
                     help="tracemalloc traceback depth (0: no tracemalloc)")
     ap.add_argument("--trim-each", action="store_true", help="malloc_trim(0) after each sample")
+    ap.add_argument("--raw-malloc", action="store_true",
+                    help="glibc's defaults, not `wideprint serve`'s process settings")
+    ap.add_argument("--no-job-trim", action="store_true",
+                    help="the server does not trim the C heap after each job")
+    ap.add_argument("--idle-after", type=float, help="stop feeding after this many minutes")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    res = run(a.minutes, a.out, a.frames, a.trim_each)
+    res = run(a.minutes, a.out, a.frames, a.trim_each, shipped=not a.raw_malloc,
+              job_trim=not a.no_job_trim, idle_after=a.idle_after)
     print(json.dumps({k: v for k, v in res.items() if k != "samples"}, indent=1))
     return 0
 

@@ -2,6 +2,8 @@
 (app/server/worker.py EMULATOR_EVENTS_KEPT; the 30-minute GUI soak's RSS grew with each
 emulated printer's event deque of 200,000 records, ~350 B each)."""
 
+import time
+
 import numpy as np
 import tifffile
 
@@ -24,6 +26,62 @@ def test_a_server_emulator_keeps_a_bounded_event_log(tmp_path):
         assert emulators and all(e.events.maxlen == EMULATOR_EVENTS_KEPT for e in emulators)
         assert EMULATOR_EVENTS_KEPT <= 20_000
         assert any(e["event"] == "job_end" for e in emulators[0].events)   # still a log
+    finally:
+        client.close()
+        srv.stop(timeout=5)
+
+
+# what a fragmented C heap looks like to a server: 1 kB blocks (above pymalloc's 512 B, so
+# glibc's), one kept in every 16 (one page in four still used), the rest freed; then the
+# worker's trim after a job (app/server/heap.py).  In a fresh process: pytest's own heap
+# would blur the figure.
+_FRAGMENT = """
+import sys, time
+from wideprint.app.server import heap
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / 2**20
+blocks = [bytes(1000) + bytes([i % 256]) for i in range(200_000)]
+kept = blocks[::16]
+del blocks
+before = rss()
+first = heap.give_back()
+after = rss()
+again = heap.give_back()            # within MIN_INTERVAL_S: not again
+print(before, after, first, again, len(kept))
+"""
+
+
+def test_the_worker_gives_the_free_c_heap_back_after_a_job():
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _FRAGMENT], capture_output=True, text=True,
+                         timeout=60, check=True).stdout.split()
+    before, after = float(out[0]), float(out[1])
+    assert out[2:4] == ["True", "False"]
+    # ~190 MB allocated, 15/16 freed but held by the allocator among the kept blocks
+    assert before - after > 60, (before, after)
+
+
+def test_the_worker_trims_after_each_job(tmp_path, monkeypatch):
+    from wideprint.app.server import PrintServer, ServerConfig, heap
+    trims: list[float] = []
+    monkeypatch.setattr(heap, "_trim", lambda pad: trims.append(time.monotonic()))
+    monkeypatch.setattr(heap, "MIN_INTERVAL_S", 0.0)
+    srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "m",
+                                   port=0))
+    srv.start()
+    client = Client(srv.state_dir)
+    try:
+        src = tmp_path / "a.tif"
+        tifffile.imwrite(src, np.full((40, 80, 4), 90, np.uint8), photometric="separated")
+        job = client.submit(src, settings={"placement": {"size": "pixels"}})["job"]
+        assert client.wait(job["id"], 120)["state"] == "done"
+        ended = time.monotonic()
+        deadline = ended + 10
+        while not [t for t in trims if t >= ended - 5] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert trims, "no malloc_trim after the job"
     finally:
         client.close()
         srv.stop(timeout=5)

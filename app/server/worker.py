@@ -13,7 +13,7 @@ import threading
 import time
 from typing import Any
 
-from . import archive, crashpoints, fsck
+from . import archive, crashpoints, fsck, heap
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .ripped import planes_job
 from .rolls import ROLL_HELD
@@ -310,6 +310,7 @@ class Worker(threading.Thread):
                 self._idle_since = time.monotonic()
                 if self.printer_state == "printing":
                     self.printer_state = "idle"
+                heap.give_back()             # the job's freed C heap back to the system
 
     # -- head care (docs/server.md "Head care", docs/driver.md) ----------------------------------
     def _care(self):
