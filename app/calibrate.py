@@ -127,6 +127,7 @@ class Scan:
         self.grey = dark.shape[2] == 1
         self.reg = self._register()
         self.passes: int | None = None  # the weave of a banding chart (its periods)
+        self.path = "the scan"          # its file, for messages (calibrate sets it)
 
     def band(self, channel: int) -> np.ndarray:
         return self.dark[:, :, 0 if self.grey else BAND[channel]]
@@ -282,6 +283,37 @@ def calibrate_nozzles(scan: Scan, res: Result) -> None:
     res.text.append(f"nozzles: {len(ms)} dashes measured; "
                     + (f"{len(dead)} dead: {', '.join(names)}" if dead else "no dead nozzle"))
     res.write = dict(dead_nozzles=dead)
+    nozzle_errors(scan, res, set(dead))
+
+
+def nozzle_errors(scan: Scan, res: Result, dead: set[tuple[str, int]]) -> None:
+    """Every nozzle's landing error and volume (app/nozzles.py), from a scan fine enough;
+    the dead nozzles are the ones just found, stored as no drop, so the list and the
+    measurement written together agree."""
+    from datetime import datetime, timezone
+
+    from .nozzles import MIN_SCAN_DPI, measure_nozzle_errors, summary
+    scan_dpi = 25_400.0 / scan.pix
+    if scan_dpi < MIN_SCAN_DPI - 0.5:
+        why = (f"{scan.path}: a {scan_dpi:g} dpi scan is too coarse to measure the nozzles' "
+               f"landing errors and drop volumes (needs {MIN_SCAN_DPI:g} dpi: print the nozzle "
+               f"check with --scan-dpi {MIN_SCAN_DPI:g} or scan it at {MIN_SCAN_DPI:g} dpi); "
+               "dead nozzles only")
+        res.found["errors"] = None
+        res.found["errors_refused"] = why
+        res.text.append(why)
+        return
+    dy, volume = measure_nozzle_errors(scan, dead)
+    when = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    heads = scan.profile.heads
+    dy_um = {h.name: [round(float(v), 2) for v in dy[h.index]] for h in heads}
+    pct = {h.name: [round(float(v), 2) for v in (volume[h.index] - 1.0) * 100.0] for h in heads}
+    spread = summary(dy, volume)
+    res.found["errors"] = dict(measured=when, dy_um=dy_um, volume_pct=pct, **spread)
+    res.text.append(f"nozzle errors ({spread['nozzles']} nozzles, {scan_dpi:g} dpi): landing "
+                    f"along the feed spread {spread['dy_spread_um']:.2f} µm, drop volume spread "
+                    f"{spread['volume_spread_pct']:.2f} %; --pass-mask hiding plans with them")
+    res.write["nozzle_errors"] = (dy_um, pct, when)
 
 
 def _by_head(ms: list[Measured], stroke: int | None = None, kind: str = "x") -> dict:
@@ -497,6 +529,7 @@ def calibrate(kind: str, scan_path: str, profile: Profile, dpi: int = 150, width
     dark, white, sdpi = read_scan_white(scan_path, scan_dpi)
     scan = Scan(dark, sdpi, layout, profile, dpi, white)
     scan.passes = passes                # the banding chart's weave (its periods)
+    scan.path = scan_path
     res = Result(kind, dpi)
     res.text.append(f"{scan_path}: {KINDS[kind]} at {dpi} dpi found on a {sdpi:g} dpi scan, "
                     f"rotated {scan.reg.rotation_deg:+.2f}°, scale {scan.reg.scale:.4f}")

@@ -386,6 +386,16 @@ class _HeadTable(_Spec):
         return out
 
 
+class _NozzleTable(_HeadTable):
+    """{ HEAD = [one value per nozzle], ... } for every head of [layout] heads, or none."""
+
+    def range(self) -> str:
+        return f"every head or none; one value per nozzle, each {self.value.item.range()}"
+
+    def what(self, plural: bool = False) -> str:
+        return f"a table {{ HEAD = [one {self.value.item.what()} per nozzle], ... }}"
+
+
 class _DeadNozzles(_List):
     def __init__(self) -> None:
         super().__init__(_DEAD)
@@ -480,6 +490,17 @@ class LayoutSection(_Section):
     head_y_um: dict[str, float] = _key(_HeadTable(_Num(ge=-10000, le=10000)), {},
                                        doc="measured: the head sits this far down the paper from "
                                        "y_rows; recorded, not applied (under a nozzle pitch)")
+    nozzle_dy_um: dict[str, tuple[float, ...]] = _key(
+        _NozzleTable(_List(_Num(ge=-1000, le=1000))), {},
+        doc="measured (calibrate nozzles, 1200 dpi scan): each nozzle's drops land this far "
+        "down the paper from its row; the `hiding` pass mask plans with it (docs/quality.md)")
+    nozzle_volume_pct: dict[str, tuple[float, ...]] = _key(
+        _NozzleTable(_List(_Num(ge=-100, le=200))), {},
+        doc="measured with nozzle_dy_um: each nozzle's drop volume against its colour's "
+        "median, %; -100: no drop (dead, or nozzles 0 and 127)")
+    nozzles_measured: str | None = _key(_Str(), None, shown="none",
+                                        doc="when nozzle_dy_um and nozzle_volume_pct were "
+                                        "measured (UTC, ISO 8601)")
 
     @property
     def heads_per_color(self) -> int:
@@ -510,6 +531,22 @@ class LayoutSection(_Section):
                     raise at_heads.error(f"heads {other} and {h.name} print the same row")
         if not set.intersection(*(set(r) for r in rows.values())):
             raise at_heads.error("no row that every colour can print (y_rows)")
+        # the nozzles' measured errors come as a whole: every head, every nozzle, dated
+        names = [h.name for h in self.heads]
+        tables = (("nozzle_dy_um", self.nozzle_dy_um), ("nozzle_volume_pct", self.nozzle_volume_pct))
+        if any(t for _, t in tables):
+            for key, table in tables:
+                missing = [n for n in names if n not in table]
+                if missing:
+                    raise at.sub(key).error(f"no values for head(s) {', '.join(missing)}: "
+                                            "the nozzles are measured all at once (calibrate nozzles)")
+                for name, values in table.items():
+                    if len(values) != ctx.head.nozzles:
+                        raise at.sub(key).sub(name).error(
+                            f"{len(values)} values, the head has {ctx.head.nozzles} nozzles")
+            if not self.nozzles_measured:
+                raise at.sub("nozzles_measured").error(
+                    "missing: when nozzle_dy_um and nozzle_volume_pct were measured")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -999,7 +1036,9 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
                      head_y_um: dict[str, float] | None = None,
                      head_y_rows: dict[str, int] | None = None,
                      travel_error_ppm: float | None = None,
-                     curves: dict[str, list[tuple[float, float]]] | None = None) -> Profile:
+                     curves: dict[str, list[tuple[float, float]]] | None = None,
+                     nozzle_errors: tuple[dict[str, Any], dict[str, Any], str] | None = None
+                     ) -> Profile:
     """Write calibration results into a profile file, keeping its comments and layout
     (tomlkit edits the document in place), and return the reloaded profile, which
     validates them; a result that does not load leaves the file as it was.
@@ -1010,7 +1049,10 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     it); written as `dead_nozzles = [{ head = "M1", nozzle = 57 }, ...]` in [layout].
     From scans (docs/calibration.md): bidir_fine_steps {dpi: 64ths}, head_x_um and head_y_um
     {head: µm} (each the whole table), head_y_rows {head: rows}, [feed]
-    travel_error_ppm, and [curves] {ink: [(in, out), ...]} (inks not given are kept)."""
+    travel_error_ppm, and [curves] {ink: [(in, out), ...]} (inks not given are kept).
+    nozzle_errors: ({head: [µm per nozzle]}, {head: [% per nozzle]}, when), every head:
+    [layout] nozzle_dy_um, nozzle_volume_pct (written as [layout.nozzle_dy_um] tables of
+    arrays, 16 values a line) and nozzles_measured, replaced whole."""
     path = Path(path)
     try:
         doc = tomlkit.parse(path.read_text())
@@ -1059,6 +1101,19 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
         value = ("[" + ", ".join(items) + "]" if len(items) <= 4 else       # one a line if many
                  "[\n" + "".join(f"  {it},\n" for it in items) + "]")
         layout["dead_nozzles"] = tomlkit.parse(f"v = {value}")["v"]
+    if nozzle_errors is not None:
+        dy, volume, when = nozzle_errors
+        layout["nozzles_measured"] = str(when)
+        for key, per_head in (("nozzle_dy_um", dy), ("nozzle_volume_pct", volume)):
+            table = tomlkit.table()
+            for name, values in per_head.items():
+                vals = [f"{_um(v)}" for v in values]
+                lines = "".join("  " + ", ".join(vals[i:i + 16]) + ",\n"
+                                for i in range(0, len(vals), 16))
+                table[str(name)] = tomlkit.parse(f"v = [\n{lines}]")["v"]
+            if key in layout:
+                del layout[key]
+            layout[key] = table
     text = tomlkit.dumps(doc)
     _parse(text, path)               # checked before the file changes, messages name it
     tmp = path.with_suffix(path.suffix + ".tmp")

@@ -24,7 +24,8 @@ from typing import Any, Callable, Iterable, Mapping
 METHODS = ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise", "joint")   # rip/halftone.py
 ORDERED = ("bayer", "bluenoise")                                 # screens, not diffusion
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)                                 # rip/swath.py weaves
-PASS_MASKS = ("checker", "random", "feather", "shingle")         # rip/swath.py
+# rip/swath.py; "hiding" plans with the nozzles the profile's calibration measured
+PASS_MASKS = ("checker", "random", "feather", "shingle", "hiding")
 INTENTS = ("perceptual", "relative", "saturation", "absolute")   # rip/color.py (LittleCMS)
 SIZES = ("physical", "pixels")                                   # rip/place.py
 FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kernels
@@ -143,7 +144,8 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("pass_mask", str, "checker", "which pass prints which dot (docs/geometry.md)",
             choices=PASS_MASKS, label="Pass mask",
             labels={"checker": "Checkerboard", "random": "Random (blue noise)",
-                    "feather": "Feathered edges", "shingle": "Shingled (raised cosine)"}),
+                    "feather": "Feathered edges", "shingle": "Shingled (raised cosine)",
+                    "hiding": "Nozzle-error hiding (calibrate nozzles)"}),
     Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
             "with threshold modulation, the best for photographs; vector: the same with C and M, "
             "Y and K dots kept apart, the least grain in light mixed colours; dbs: vced's dots "

@@ -174,7 +174,12 @@ class StrokePlanner:
             ranks = load_bluenoise_mask()
             qmask = (ranks.astype(np.int64) * MASK_LEVELS // ranks.size).astype(np.int16)
             u = (np.arange(MASK_LEVELS) + 0.5) / MASK_LEVELS
-            if mask == "random" or n == 1:
+            if mask == "hiding":
+                # the measured nozzles' shares, per colour (rip/hiding.py); no measurement
+                # stored is an error naming `calibrate nozzles`, never another mask
+                from .hiding import hiding_shares
+                weights = hiding_shares(self.profile, n)
+            elif mask == "random" or n == 1:
                 weights = np.ones((a, n))
             elif mask == "shingle":
                 weights = shingle_weights(n, a)
@@ -184,11 +189,12 @@ class StrokePlanner:
                 j = np.arange(n)[None, :]
                 pos = (rho + (n - 1 - j) * a + 0.5) / (n * a)
                 weights = np.clip(np.minimum(pos, 1 - pos) / FEATHER, 0.05, 1.0)
-            cum = np.cumsum(weights / weights.sum(axis=1, keepdims=True), axis=1)
-            jsel = np.minimum((u[None, :, None] > cum[:, None, :]).sum(axis=2), n - 1)
-        sel = np.empty((len(COLORS), a, jsel.shape[1]), np.int16)
+            cum = np.cumsum(weights / weights.sum(axis=-1, keepdims=True), axis=-1)
+            jsel = np.minimum((u[:, None] > cum[..., None, :]).sum(axis=-1), n - 1)
+        sel = np.empty((len(COLORS), a, jsel.shape[-1]), np.int16)
         for c in range(len(COLORS)):
-            sel[c] = np.take_along_axis(self._remap[c], np.asarray(jsel, np.int64), axis=1)
+            js = jsel[c] if jsel.ndim == 3 else jsel          # hiding: per colour
+            sel[c] = np.take_along_axis(self._remap[c], np.asarray(js, np.int64), axis=1)
         return np.ascontiguousarray(qmask), sel
 
     def _mask_bit_rows(self) -> tuple[np.ndarray, np.ndarray]:
@@ -207,6 +213,13 @@ class StrokePlanner:
             jsel = srow[self._qmask]                                  # (th, tw): j of each dot
             rows[u] = np.packbits(jsel[:, None, :] == j, axis=-1)
         return rows, index.reshape(self._sel.shape[:2]).astype(np.int64)
+
+    def _stroke_mask(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stroke i's selection: (mask rows, mask index, sel) as `_mask_bit_rows` and
+        `_pass_mask` give them, the index and sel per colour and image row modulo their
+        length: the same for every stroke, per row phase (r mod A).  Per-stroke shares
+        (rip/stroke_hiding.py) give the N A rows of a stroke their own (r mod N A)."""
+        return self._mask_rows, self._mask_index, self._sel
 
     # -- streaming ----------------------------------------------------------------------
     def feed(self, band: np.ndarray) -> list[StrokeData]:
@@ -282,19 +295,20 @@ class StrokePlanner:
         dots_parts = np.zeros((len(parts), 4), np.int64)
         spans = np.array([[fires_all, 0]] * len(parts), np.int64)   # fires with a dot: [lo, hi)
         hpc = self.profile.heads_per_color
+        mask_rows, mask_index, sel = self._stroke_mask(i)
         if self.block_pack:
             words8 = words.view(np.uint8)                   # (heads, fires, 16), little-endian
             run_parallel(
                 (lambda w=w, a=a, b=b: _pack_stroke_blocks(
                     self._buf, self.width, self._base, lo, hi, top, i, self.advance, self.n,
-                    self.s0, self._mask_rows, self._mask_index, self._slot_table, channel,
+                    self.s0, mask_rows, mask_index, self._slot_table, channel,
                     y_rows, cols, hpc, spread_lo, a, b, words8, dots_parts[w], spans[w]))
                 for w, (a, b) in enumerate(parts))
         else:
             run_parallel(
                 (lambda w=w, a=a, b=b: _pack_stroke(
                     self._buf, self.width, self._base, lo, hi, top, i, self.advance, self.n,
-                    self.s0, self._qmask, self._sel, self._slot_table, channel, y_rows, cols,
+                    self.s0, self._qmask, sel, self._slot_table, channel, y_rows, cols,
                     hpc, spread_lo, a, b, words, dots_parts[w], spans[w]))
                 for w, (a, b) in enumerate(parts))
         dots = dots_parts.sum(axis=0)
@@ -444,7 +458,7 @@ def _pack_stroke_blocks(buf, width, base, lo, hi, top, i_stroke, advance, n, s0,
                 offs[k] = ((rr - base) * 4 + ch) * wb
                 j = i_stroke - rr // advance
                 j = min(max(j, 0), n - 1)
-                moffs[k] = ((mask_index[ch, rr % advance] * th + rr % th) * n + j) * tb
+                moffs[k] = ((mask_index[ch, rr % mask_index.shape[1]] * th + rr % th) * n + j) * tb
                 if r >= 0:
                     keep |= np.uint64(0xFF) << np.uint64(8 * k)
             if keep == 0:
@@ -522,7 +536,7 @@ def _pack_stroke(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, qmask,
             bit = np.uint16(1 << (z & 15))
             t_off = -head_col[h] - spread_lo
             qrow = qmask[r % th]
-            srow = sel[ch, rho]
+            srow = sel[ch, r % sel.shape[1]]
             pix = buf[row, ch]                          # packed bits, x = 0 in bit 7
             out = words[h, :, word]
             count = 0
