@@ -74,6 +74,7 @@ JITTER_KEYS = ((0, 36000), (44, 2000), (96, 2000), (127, 12000))
 WEIGHT_BITS = 10        # the filter weights in 1/1024
 RING = 16               # rows of past error kept per ink (> the coarse filter's reach)
 BELOW = -1              # the rows whose filtered error counts: down to the one above (see below)
+UPD = 32                # cells a change updates in c_pe (its 2 rx + 3 padded: one fixed-length add)
 
 
 def _gauss(sigma: float, radius: int) -> np.ndarray:
@@ -104,6 +105,8 @@ def filter_tables(fine: float = EYE_FINE, coarse: float = EYE_COARSE,
         ax, ay = sigma * np.sqrt(2.0), sigma * aspect
         rx, ry = int(np.ceil(truncate * ax)), int(np.ceil(truncate * ay))
         gx = np.rint(_gauss(ax, rx) * (1 << WEIGHT_BITS)).astype(np.int32)
+        nz = np.flatnonzero(gx)
+        gx = gx[nz[0]:nz[-1] + 1]                   # (taps rounded to 0 cost time, not dots)
         g = _gauss(ay, ry)                          # the eye's Gaussian along, rows -ry..ry
         last = 2 * ry if below is None else min(2 * ry, ry + int(below))
         w = np.array([sum(g[i] * g[i + k] for i in range(0, min(2 * ry + 1 - k, last + 1)))
@@ -127,21 +130,50 @@ def filter_tables(fine: float = EYE_FINE, coarse: float = EYE_COARSE,
     return kf, yf, kc, yc, k0.astype(np.int32)
 
 
+def update_table(k0: np.ndarray) -> np.ndarray:
+    """(6, UPD) int32: what a change adds to c_pe over the cells x - rx - 1 .., row
+    2 (off + 1) + h for a toggle (off 0) or a swap with x + off (-1, 1) of the pixel x whose
+    dot was h (0: one is added, +255 x k0 centred on x; 1: removed); a swap also takes the
+    same, negated, centred on x + off."""
+    rx = k0.size // 2
+    if 2 * rx + 3 > UPD:
+        raise ValueError("the filter is wider than a change's update")
+    out = np.zeros((6, UPD), np.int32)
+    for off in (-1, 0, 1):
+        for h in (0, 1):
+            d = 255 * (1 - 2 * h)
+            row = out[2 * (off + 1) + h]
+            row[1:2 * rx + 2] += d * k0
+            if off:
+                row[1 + off:2 * rx + 2 + off] -= d * k0
+    return out
+
+
 @kernel(inline="always")
-def _add_filtered(out, e, k, P, W):
-    """out[P + x] += sum over j of k[j] e[P + x + j - r] for x < W, k of 2 r + 1 taps (row
-    slices: indices numba sees as non-negative, so the loops vectorise)."""
+def _filter_across(out, e, k, P, W, add):
+    """out[P + x] (+)= sum over j of k[j] e[P + x + j - r] for x < W, k symmetric of 2 r + 1
+    taps: the pairs of taps summed first (half the multiplies, the same integers); row
+    slices, so numba sees non-negative indices and the loops vectorise."""
     r = k.shape[0] // 2
     os_ = out[P:P + W]
-    for j in range(2 * r + 1):
-        kj = k[j]
-        es = e[P - r + j:P - r + j + W]
+    es = e[P:P + W]
+    kr = k[r]
+    if add:
         for x in range(W):
-            os_[x] += kj * es[x]
+            os_[x] += kr * es[x]
+    else:
+        for x in range(W):
+            os_[x] = kr * es[x]
+    for j in range(1, r + 1):
+        kj = k[r + j]
+        lo = e[P - j:P - j + W]
+        hi = e[P + j:P + j + W]
+        for x in range(W):
+            os_[x] += kj * (lo[x] + hi[x])
 
 
 @kernel()
-def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, passes, guard, noise,
+def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guard, noise,
              offs, jit):  # pragma: no cover - compiled
     """Refine channels c0..c1-1 of dst ((rows, W, ch) uint8 0/1, vced's dots on entry) in
     place against src ((rows, W, ch) uint8 ink); row0 the absolute row of src[0]; ring
@@ -156,7 +188,7 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, passes, guard, no
     L = W + 2 * P
     m = ring.shape[1] - 1
     nm = noise.shape[0] - 1
-    cpe = np.zeros(L, np.int32)
+    cpe = np.zeros(L + UPD, np.int32)  # (the tail: a change's fixed-length update)
     ef = np.zeros(L, np.int32)
     ec = np.zeros(L, np.int32)
     e = np.zeros(L, np.int32)
@@ -176,22 +208,20 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, passes, guard, no
             r = row0 + i
             hr = dst[i, :, c]
             sr = src[i, :, c]
-            na = 0
-            for x in range(W):
+            for x in range(W):                  # (no loop-carried state: vectorises)
                 v = np.int32(sr[x])
                 h = hr[x]
                 hp[x + P] = h
                 e[x + P] = 255 * np.int32(h) - v
                 tog[x + P] = 1 if guard < v < 255 - guard else 0
-                mv = 1 if 0 < v < 255 else 0
-                mov[x + P] = mv
+                mov[x + P] = 1 if 0 < v < 255 else 0
+            nrow = noise[(r + oy) & nm]
+            na = 0
+            for x in range(W):
+                lims[x + P] = -((jit[sr[x]] * np.int64(nrow[(x + ox) & nm])) >> 1)
                 act[na] = x + P
-                na += mv
+                na += mov[x + P]
             if na > 0:                          # (a row of inks 0 and 255 only: nothing to try)
-                nrow = noise[(r + oy) & nm]
-                for k in range(na):
-                    x = act[k]
-                    lims[x] = -((jit[sr[x - P]] * np.int64(nrow[(x - P + ox) & nm])) >> 1)
                 # c_pe = kf * (sum over dy of yf[dy] e[r - dy]) + the same with kc, yc: the
                 # past rows' errors weighted along, then filtered across (exact in integers)
                 wf = yf[0]
@@ -199,19 +229,27 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, passes, guard, no
                 for x in range(L):
                     ef[x] = wf * e[x]
                     ec[x] = wc * e[x]
-                for dy in range(1, ryf + 1):
+                for dy in range(1, max(ryf, ryc) + 1):
                     er = rc[(r - dy) & m]
-                    wy = yf[dy]
-                    for x in range(L):
-                        ef[x] += wy * er[x]
-                for dy in range(1, ryc + 1):
-                    er = rc[(r - dy) & m]
-                    wy = yc[dy]
-                    for x in range(L):
-                        ec[x] += wy * er[x]
-                cpe[:] = 0
-                _add_filtered(cpe, ef, kf, P, W)
-                _add_filtered(cpe, ec, kc, P, W)
+                    if dy <= min(ryf, ryc):     # both terms: the past row read once
+                        wy = yf[dy]
+                        wz = yc[dy]
+                        for x in range(L):
+                            ex = er[x]
+                            ef[x] += wy * ex
+                            ec[x] += wz * ex
+                    elif dy <= ryf:
+                        wy = yf[dy]
+                        for x in range(L):
+                            ef[x] += wy * er[x]
+                    else:
+                        wy = yc[dy]
+                        for x in range(L):
+                            ec[x] += wy * er[x]
+                cpe[:P] = 0
+                cpe[P + W:] = 0
+                _filter_across(cpe, ef, kf, P, W, False)
+                _filter_across(cpe, ec, kc, P, W, True)
                 dirty[P:P + W] = 1
             for it in range(passes if na > 0 else 0):
                 changes = 0
@@ -243,21 +281,19 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, passes, guard, no
                     if best < lims[x]:
                         changes += 1
                         hp[x] = 1 - hp[x]
-                        d = np.int32(255 * a)
-                        e[x] += d
-                        cv = cpe[x - rx:x + rx + 1]
-                        for j in range(2 * rx + 1):
-                            cv[j] += d * k0[j]
-                        lo, hi = x, x
+                        e[x] += 255 * a
                         if off != 0:
                             bx = x + off
                             hp[bx] = 1 - hp[bx]
-                            e[bx] -= d
-                            cv = cpe[bx - rx:bx + rx + 1]
-                            for j in range(2 * rx + 1):
-                                cv[j] -= d * k0[j]
-                            lo, hi = min(x, bx), max(x, bx)
-                        dirty[max(P, lo - rx - 1):min(P + W, hi + rx + 2)] = 1
+                            e[bx] -= 255 * a
+                        # c_pe over the window x - rx - 1 .. : the change's row of upd,
+                        # one fixed-length add (vectorises fully: no remainder loop)
+                        u = upd[(off + 1) * 2 + hx]
+                        cv = cpe[x - rx - 1:x - rx - 1 + UPD]
+                        for j in range(UPD):
+                            cv[j] += u[j]
+                        lo = x - rx - 1 + min(off, 0)
+                        dirty[lo:lo + 2 * rx + 3 + (off & 1)] = 1
                 if changes == 0:
                     break
             if na > 0:
@@ -276,6 +312,7 @@ class RowDBS:
                  passes: int = PASSES, guard: int = TONE_GUARD, jitter=None, **filt):
         self.width, self.channels = int(width), int(channels)
         self.kf, self.yf, self.kc, self.yc, self.k0 = filter_tables(**filt)
+        self.upd = update_table(self.k0)
         pad = self.k0.size // 2 + 2
         self.ring = np.zeros((self.channels, RING, self.width + 2 * pad), np.int32)
         self.noise = np.ascontiguousarray(noise)
@@ -290,6 +327,6 @@ class RowDBS:
         bounds = np.linspace(0, self.channels, groups + 1).astype(int)
         return [lambda a=int(a), b=int(b): dbs_rows(
                     band, dots, a, b, int(row0), self.ring, self.kf, self.yf, self.kc,
-                    self.yc, self.k0, self.passes, self.guard, self.noise, self.offsets,
+                    self.yc, self.k0, self.upd, self.passes, self.guard, self.noise, self.offsets,
                     self.jitter)
                 for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
