@@ -1,7 +1,7 @@
 """Pass masks designed against the measured machine (issue 36): "nozzle-error hiding".
 
     .venv/bin/python bench/banding_hiding.py [--machines typical,tired] [--seeds 1,2]
-        [--passes 4] [--out bench/results/banding_hiding.json]
+        [--passes 4] [--masks checker,...,stroke-hiding] [--out bench/results/banding_hiding.json]
 
 Per machine (docs/physical.md "The machine", drawn from the seed):
 1. the nozzle check is printed on it and scanned at 1200 dpi; every nozzle's dash is
@@ -14,14 +14,17 @@ Per machine (docs/physical.md "The machine", drawn from the seed):
    towards equal shares by the error the feed's whole steps leave at each stroke
    (`rip.masks.stroke_error_um`), which shares per row phase cannot follow;
    "oracle" does the same from the machine's true errors (the bound of what the measurement
-   could give);
+   could give); "stroke-hiding" (`rip.stroke_hiding`) gives each block of A rows its own
+   shares from the known error of each of its strokes, so that the rounding cancels with the
+   nozzles' errors row by row ("stroke-oracle": from the true errors);
 3. the banding chart is printed at --passes with the checkerboard (today's default), the
    random mask (the same blue-noise split with equal shares) and the hiding shares, scanned
    at 600 dpi, and measured by `wideprint quality` (app/quality.py): the mean over the ten
    tints of the eye-weighted banding, RMS ΔL* at 500 mm.
 
 The shares reach the stroke planner through its pass-mask hook (the planner's selection per
-colour and row phase, rip/swath.py `_pass_mask`): this bench swaps it in for the run.
+colour and row phase, rip/swath.py `_pass_mask`), the per-stroke shares through its
+`_stroke_mask` hook (stroke i's selection): this bench swaps them in for the run.
 """
 
 from __future__ import annotations
@@ -48,12 +51,14 @@ from wideprint.device_sim.physical import PhysicalModel
 from wideprint.rip import swath
 from wideprint.rip.masks import hiding_weights, load_bluenoise_mask, stroke_error_um
 from wideprint.rip.profile import load_profile
+from wideprint.rip.stroke_hiding import StrokeClasses, StrokeMasks, stroke_hiding_weights
 from wideprint.rip.testprints import scan_layout
 
 NOZZLE_DPI, NOZZLE_WIDTH_MM, NOZZLE_SCAN_DPI = 150, 200, 1200
 WINDOW_ROWS = 4
 CHART_DPI, CHART_WIDTH_MM, CHART_SCAN_DPI = 300, 100, 600
 _HIDING: dict = {}          # passes -> (4, A, N) shares, while a run prints with them
+_STROKE: dict = {}          # passes -> ((K, 4, A, N) shares, StrokeClasses): per stroke
 
 
 def slots(profile, passes: int) -> np.ndarray:
@@ -70,6 +75,10 @@ def slots(profile, passes: int) -> np.ndarray:
 def _pass_mask(self, mask):
     """The planner's selection with the hiding shares per colour (the blue-noise split of
     the random mask, unequal shares)."""
+    stroke = _STROKE.get(self.n)
+    if stroke is not None and mask == "random":
+        self._stroke_masks = StrokeMasks(self, *stroke)
+        return self._stroke_masks.qmask, self._stroke_masks.sel[0]
     weights = _HIDING.get(self.n)
     if weights is None or mask != "random":
         return _ORIGINAL(self, mask)
@@ -84,7 +93,14 @@ def _pass_mask(self, mask):
     return np.ascontiguousarray(qmask), sel
 
 
+def _stroke_mask(self, i):
+    """Stroke i's selection: the per-stroke shares' where `_pass_mask` set them."""
+    masks = getattr(self, "_stroke_masks", None)
+    return _ORIGINAL_STROKE(self, i) if masks is None else masks(i)
+
+
 _ORIGINAL = swath.StrokePlanner._pass_mask
+_ORIGINAL_STROKE = swath.StrokePlanner._stroke_mask
 
 
 def _cli(argv: list[str]) -> None:
@@ -166,7 +182,8 @@ def chart(machine: str, seed: int, passes: int, mask: str, workdir: str) -> dict
                 advance=float(np.mean([q.components[0].amplitude for q in rep.tints])))
 
 
-MASK_NAMES = ("checker", "random", "hiding", "oracle")
+MASK_NAMES = ("checker", "random", "hiding", "oracle", "stroke-hiding")
+STROKE_MASKS = ("stroke-hiding", "stroke-oracle")     # shares per stroke (rip/stroke_hiding.py)
 
 
 def run(machine: str, seed: int, passes: int, workdir: str, profile,
@@ -188,17 +205,24 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
     stroke = stroke_error_um(load_profile(PROFILE[0]) if PROFILE else profile, passes)
     err["stroke_error_um"] = round(stroke, 3)
     print(f"  the feed's whole steps leave {stroke:.2f} µm at a stroke", flush=True)
-    shares = dict(hiding=hiding_weights(dy_m, vol_m, sl, stroke_error_um=stroke),
-                  oracle=hiding_weights(dy_t, vol_t, sl, stroke_error_um=stroke))
+    shares = dict(hiding=lambda: hiding_weights(dy_m, vol_m, sl, stroke_error_um=stroke),
+                  oracle=lambda: hiding_weights(dy_t, vol_t, sl, stroke_error_um=stroke))
+    classes = StrokeClasses.of(load_profile(PROFILE[0]) if PROFILE else profile, passes)
+    shares["stroke-hiding"] = lambda: stroke_hiding_weights(dy_m, vol_m, sl, classes.class_errors_um())
+    shares["stroke-oracle"] = lambda: stroke_hiding_weights(dy_t, vol_t, sl, classes.class_errors_um())
     for name in masks:
-        weights = shares.get(name)
+        weights = shares[name]() if name in shares else None
         _HIDING.clear()
-        if weights is not None:
+        _STROKE.clear()
+        if name in STROKE_MASKS:
+            _STROKE[passes] = (weights, classes)
+        elif weights is not None:
             _HIDING[passes] = weights
         try:
             r = chart(machine, seed, passes, "checker" if name == "checker" else "random", workdir)
         finally:
             _HIDING.clear()
+            _STROKE.clear()
         r.update(machine=machine, seed=seed, passes=passes, mask=name, nozzle_check=err,
                  whole_step_feed=bool(PROFILE),
                  sum_w2=None if weights is None else round(float((weights ** 2).sum(axis=2).mean()), 4))
@@ -216,10 +240,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--passes", type=int, default=4)
     ap.add_argument("--whole-step-feed", action="store_true",
                     help="the feed roller sized so that every feed is whole steps (30.047 mm)")
+    ap.add_argument("--masks", default=",".join(MASK_NAMES),
+                    help="of " + ", ".join(MASK_NAMES + STROKE_MASKS[1:]))
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     profile = load_profile()
     swath.StrokePlanner._pass_mask = _pass_mask
+    swath.StrokePlanner._stroke_mask = _stroke_mask
     runs: list[dict] = []
     try:
         with tempfile.TemporaryDirectory(prefix="wideprint-hiding-") as d:
@@ -227,17 +254,20 @@ def main(argv: list[str] | None = None) -> int:
                 PROFILE[:] = [whole_step_profile(d, args.passes)]
             for machine in args.machines.split(","):
                 for seed in (int(s) for s in args.seeds.split(",")):
-                    runs += run(machine, seed, args.passes, d, profile)
+                    runs += run(machine, seed, args.passes, d, profile,
+                                masks=tuple(args.masks.split(",")))
                     if args.out:
                         Path(args.out).write_text(json.dumps(dict(runs=runs), indent=1) + "\n")
     finally:
         swath.StrokePlanner._pass_mask = _ORIGINAL
+        swath.StrokePlanner._stroke_mask = _ORIGINAL_STROKE
     table: dict = {}
     for r in runs:
         table.setdefault(f"{r['machine']} {r['passes']} pass", {}).setdefault(r["mask"], []).append(r["banding"])
     summary = {mode: {m: round(float(np.mean(v)), 4) for m, v in masks.items()} for mode, masks in table.items()}
     for mode, masks in summary.items():
-        print(mode + ": " + ", ".join(f"{m} {v:.3f} ({v / masks['checker']:.2f}x)" for m, v in masks.items()))
+        ref = masks.get("checker", np.nan)
+        print(mode + ": " + ", ".join(f"{m} {v:.3f} ({v / ref:.2f}x)" for m, v in masks.items()))
     if args.out:
         Path(args.out).write_text(json.dumps(dict(
             what="banding chart, 300 dpi, 600 dpi scan, eye at 500 mm; shares from a 1200 dpi "
