@@ -7,9 +7,12 @@ shares by the error the feed's whole steps leave at each stroke (`rip.masks.stro
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 import numpy as np
 
-from .profile import Profile, ProfileError
+from .profile import DEFAULT_PROFILE, Profile, ProfileError
 
 
 def weave_slots(profile: Profile, passes: int) -> np.ndarray:
@@ -27,11 +30,13 @@ def measured_errors(profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     nozzle), as stored; a clear error naming what to run when nothing is."""
     lay = profile.layout
     if not lay.nozzle_dy_um:
+        target = ("PRINTER.toml (a copy of the built-in profile)"
+                  if Path(profile.path) == DEFAULT_PROFILE else profile.path)
         raise ProfileError(
             f"{profile.path}: pass mask \"hiding\" needs the nozzles measured, and this "
             "profile has no [layout] nozzle_dy_um: print `wideprint test-print nozzle-check "
             "--scan-dpi 1200 --scan-out nc.tif`, then run `wideprint calibrate nozzles --scan "
-            f"nc.tif --write --profile {profile.path}` (docs/calibration.md)")
+            f"nc.tif --write --profile {target}` (docs/calibration.md)")
     dy = np.array([lay.nozzle_dy_um[h.name] for h in profile.heads], np.float64)
     pct = np.array([lay.nozzle_volume_pct[h.name] for h in profile.heads], np.float64)
     return dy, 1.0 + pct / 100.0
@@ -47,4 +52,18 @@ def hiding_shares(profile: Profile, passes: int) -> np.ndarray:
     h, z = slots[..., 0], slots[..., 1]
     dry = (h >= 0) & (volume[np.maximum(h, 0), z] <= 0)
     slots[dry] = -1
-    return hiding_weights(dy, volume, slots, stroke_error_um=stroke_error_um(profile, passes))
+    stroke = stroke_error_um(profile, passes)
+    # a row's programme tries every subset of its passes: 4.7 s a plan at 8 passes, so the
+    # shares are kept for the next job with the same measurement, weave and feed
+    key = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (
+        dy, volume, slots, np.array([stroke])))).hexdigest()
+    if key not in _SHARES:
+        if len(_SHARES) >= 16:
+            _SHARES.pop(next(iter(_SHARES)))
+        shares = hiding_weights(dy, volume, slots, stroke_error_um=stroke)
+        shares.setflags(write=False)
+        _SHARES[key] = shares
+    return _SHARES[key]
+
+
+_SHARES: dict[str, np.ndarray] = {}

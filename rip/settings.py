@@ -141,7 +141,8 @@ SETTINGS: tuple[Setting, ...] = (
             label="Passes", labels={n: f"{n} pass" + ("es" if n > 1 else "") for n in PASS_COUNTS}),
     Setting("bidir", bool, False, "print on both strokes of the carriage (left to right and back)",
             label="Direction", labels={False: "Unidirectional", True: "Bidirectional"}),
-    Setting("pass_mask", str, "checker", "which pass prints which dot (docs/geometry.md)",
+    Setting("pass_mask", str, "checker", "which pass prints which dot (docs/geometry.md; "
+            "hiding: shares from the nozzles `wideprint calibrate nozzles` measured)",
             choices=PASS_MASKS, label="Pass mask",
             labels={"checker": "Checkerboard", "random": "Random (blue noise)",
                     "feather": "Feathered edges", "shingle": "Shingled (raised cosine)",
