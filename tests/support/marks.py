@@ -236,6 +236,13 @@ SLOW: dict[str, set[str] | str] = {
     "test_noisy_line.py": {
         "test_an_open_but_silent_port_is_exit_3",  # 1.1
     },
+    "test_nozzle_cal.py": {
+        "test_calibrate_nozzles_recovers_the_typical_machines_errors",  # 19.1 (its fixture)
+        "test_hiding_reads_less_banding_than_checker_on_that_machine",  # 17.6
+        "test_dead_nozzles_and_the_errors_are_written_together",  # 7.7
+        "test_hiding_prints_the_same_dots_as_checker",  # 1.9
+        "test_the_profile_keeps_a_whole_dated_measurement",  # 1.4
+    },
     "test_pci.py": {
         "test_cli_print_through_the_emulated_card_equals_cli_rip",  # 2.5
         "test_chained_dma_with_a_deep_ring_links_many_descriptors",  # 1.1
