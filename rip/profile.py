@@ -364,7 +364,7 @@ class _Heads(_List):
 class _HeadTable(_Spec):
     """{ HEAD = value, ... } keyed by head names of [layout] heads (read before it)."""
 
-    def __init__(self, value: _Num) -> None:
+    def __init__(self, value: _Spec) -> None:
         self.value = value
         self.kind = f"table head → {value.kind}"
 
@@ -389,11 +389,15 @@ class _HeadTable(_Spec):
 class _NozzleTable(_HeadTable):
     """{ HEAD = [one value per nozzle], ... } for every head of [layout] heads, or none."""
 
+    def __init__(self, each: _Num) -> None:
+        super().__init__(_List(each))
+        self.each = each
+
     def range(self) -> str:
-        return f"every head or none; one value per nozzle, each {self.value.item.range()}"
+        return f"every head or none; one value per nozzle, each {self.each.range()}"
 
     def what(self, plural: bool = False) -> str:
-        return f"a table {{ HEAD = [one {self.value.item.what()} per nozzle], ... }}"
+        return f"a table {{ HEAD = [one {self.each.what()} per nozzle], ... }}"
 
 
 class _DeadNozzles(_List):
@@ -491,11 +495,11 @@ class LayoutSection(_Section):
                                        doc="measured: the head sits this far down the paper from "
                                        "y_rows; recorded, not applied (under a nozzle pitch)")
     nozzle_dy_um: dict[str, tuple[float, ...]] = _key(
-        _NozzleTable(_List(_Num(ge=-1000, le=1000))), {},
+        _NozzleTable(_Num(ge=-1000, le=1000)), {},
         doc="measured (calibrate nozzles, 1200 dpi scan): each nozzle's drops land this far "
         "down the paper from its row; the `hiding` pass mask plans with it (docs/quality.md)")
     nozzle_volume_pct: dict[str, tuple[float, ...]] = _key(
-        _NozzleTable(_List(_Num(ge=-100, le=200))), {},
+        _NozzleTable(_Num(ge=-100, le=200)), {},
         doc="measured with nozzle_dy_um: each nozzle's drop volume against its colour's "
         "median, %; -100: no drop (dead, or nozzles 0 and 127)")
     nozzles_measured: str | None = _key(_Str(), None, shown="none",
@@ -1104,16 +1108,17 @@ def save_calibration(path: str | Path, bidir_offset_columns: dict[int, int] | No
     if nozzle_errors is not None:
         dy, volume, when = nozzle_errors
         layout["nozzles_measured"] = str(when)
-        for key, per_head in (("nozzle_dy_um", dy), ("nozzle_volume_pct", volume)):
-            table = tomlkit.table()
-            for name, values in per_head.items():
-                vals = [f"{_um(v)}" for v in values]
+        errors: dict[str, Any]
+        for key, errors in (("nozzle_dy_um", dy), ("nozzle_volume_pct", volume)):
+            nozzle_table = tomlkit.table()
+            for name, per_nozzle in errors.items():
+                vals = [f"{_um(x)}" for x in per_nozzle]
                 lines = "".join("  " + ", ".join(vals[i:i + 16]) + ",\n"
                                 for i in range(0, len(vals), 16))
-                table[str(name)] = tomlkit.parse(f"v = [\n{lines}]")["v"]
+                nozzle_table[str(name)] = tomlkit.parse(f"v = [\n{lines}]")["v"]
             if key in layout:
                 del layout[key]
-            layout[key] = table
+            layout[key] = nozzle_table
     text = tomlkit.dumps(doc)
     _parse(text, path)               # checked before the file changes, messages name it
     tmp = path.with_suffix(path.suffix + ".tmp")

@@ -530,7 +530,6 @@ def _pack_stroke(buf, width, base, lo, hi, top, i_stroke, advance, n, s0, qmask,
             if r < 0:
                 continue
             j = i_stroke - r // advance
-            rho = r % advance
             row = r - base
             word = z >> 4
             bit = np.uint16(1 << (z & 15))
