@@ -127,10 +127,12 @@ def whole_step_profile(workdir: str, passes: int) -> str:
 
 
 def _profile_args() -> list[str]:
-    return ["--profile", PROFILE[0]] if PROFILE else []
+    """The options every test print takes: the profile, the machine's overrides."""
+    return (["--profile", PROFILE[0]] if PROFILE else []) + [a for kv in INJECT for a in ("--inject", kv)]
 
 
 PROFILE: list[str] = []     # the profile test prints use (--whole-step-feed)
+INJECT: list[str] = []      # the machine's errors overridden (--inject, e.g. feed-noise=0um)
 
 
 def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +168,7 @@ def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np
 
 
 def true_nozzles(machine: str, seed: int, profile) -> tuple[np.ndarray, np.ndarray]:
-    model = PhysicalModel(profile, Faults.parse([f"machine={machine}", f"seed={seed}"]))
+    model = PhysicalModel(profile, Faults.parse([f"machine={machine}", f"seed={seed}"] + INJECT))
     return model.spread_dy_um.copy(), model.volume.copy()
 
 
@@ -224,7 +226,7 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
             _HIDING.clear()
             _STROKE.clear()
         r.update(machine=machine, seed=seed, passes=passes, mask=name, nozzle_check=err,
-                 whole_step_feed=bool(PROFILE),
+                 whole_step_feed=bool(PROFILE), inject=list(INJECT),
                  sum_w2=None if weights is None else round(float((weights ** 2).sum(axis=2).mean()), 4))
         out.append(r)
         print(f"  {name:8s} banding {r['banding']:.3f} (worst {r['banding_max']:.3f}) advance "
@@ -242,9 +244,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="the feed roller sized so that every feed is whole steps (30.047 mm)")
     ap.add_argument("--masks", default=",".join(MASK_NAMES),
                     help="of " + ", ".join(MASK_NAMES + STROKE_MASKS[1:]))
+    ap.add_argument("--inject", action="append", default=[],
+                    help="override one of the machine's errors (docs/physical.md), e.g. feed-noise=0um")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     profile = load_profile()
+    INJECT[:] = args.inject
     swath.StrokePlanner._pass_mask = _pass_mask
     swath.StrokePlanner._stroke_mask = _stroke_mask
     runs: list[dict] = []
@@ -272,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.out).write_text(json.dumps(dict(
             what="banding chart, 300 dpi, 600 dpi scan, eye at 500 mm; shares from a 1200 dpi "
                  "nozzle-check scan (bench/banding_hiding.py)", machine=platform.machine(),
-            python=sys.version.split()[0], whole_step_feed=args.whole_step_feed, modes=summary,
+            python=sys.version.split()[0], whole_step_feed=args.whole_step_feed, inject=args.inject, modes=summary,
             runs=runs),
             indent=1) + "\n")
     return 0
