@@ -212,3 +212,15 @@ def test_the_setting_is_offered_and_documented(capsys):
     assert "| `hiding` |" in docs["rip.md"]
     assert "## Nozzle-error hiding as a setting" in docs["quality.md"]
     assert "nozzle_dy_um" in docs["calibration.md"] and "1200 dpi" in docs["calibration.md"]
+
+
+def test_the_block_packer_plans_hiding_as_the_per_dot_kernel(tmp_path):
+    """The per-colour selection through both packers (docs/rip.md): the same words, dots
+    and spans, every dot once, with a dead nozzle and unequal shares per colour."""
+    from test_screen import assert_same_strokes, plan_both
+    prof = measured_profile(tmp_path)
+    dots = (np.random.default_rng(3).random((400, 131, 4)) < 0.4).astype(np.uint8)
+    fast, slow = plan_both(prof, dots, 4, "hiding", bidir=True, band=37)
+    assert_same_strokes(fast, slow, dots)
+    planner = StrokePlanner(prof, 131, 400, 300, 4, mask="hiding")
+    assert len(np.unique(planner._sel.reshape(-1, planner._sel.shape[-1]), axis=0)) > 4 * 50

@@ -242,6 +242,7 @@ SLOW: dict[str, set[str] | str] = {
         "test_dead_nozzles_and_the_errors_are_written_together",  # 7.7
         "test_hiding_prints_the_same_dots_as_checker",  # 1.9
         "test_the_profile_keeps_a_whole_dated_measurement",  # 1.4
+        "test_the_block_packer_plans_hiding_as_the_per_dot_kernel",  # 6.3
     },
     "test_pci.py": {
         "test_cli_print_through_the_emulated_card_equals_cli_rip",  # 2.5
