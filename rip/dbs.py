@@ -196,7 +196,7 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guar
     dirty = np.zeros(L, np.uint8)
     tog = np.zeros(L, np.uint8)         # a dot may be added or removed here
     mov = np.zeros(L, np.uint8)         # a dot may be moved here or from here
-    lims = np.zeros(L, np.int64)        # the jitter: a change must beat this
+    lims = np.zeros(L, np.int32)        # the jitter: a change must beat this
     act = np.zeros(W, np.int64)         # the pixels that may change (0 < ink < 255), in order
     BIG = np.int64(1) << 40
     t0 = np.int64(255) * k0[rx]         # a toggle's own cost (c_pp(0), x 255)
@@ -208,27 +208,27 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guar
             r = row0 + i
             hr = dst[i, :, c]
             sr = src[i, :, c]
+            nrow = noise[(r + oy) & nm]
+            wf = yf[0]
+            wc = yc[0]
             for x in range(W):                  # (no loop-carried state: vectorises)
                 v = np.int32(sr[x])
                 h = hr[x]
                 hp[x + P] = h
-                e[x + P] = 255 * np.int32(h) - v
+                ex = 255 * np.int32(h) - v
+                e[x + P] = ex
+                ef[x + P] = wf * ex
+                ec[x + P] = wc * ex
                 tog[x + P] = 1 if guard < v < 255 - guard else 0
                 mov[x + P] = 1 if 0 < v < 255 else 0
-            nrow = noise[(r + oy) & nm]
+                lims[x + P] = -((jit[v] * np.int32(nrow[(x + ox) & nm])) >> 1)
             na = 0
-            for x in range(W):
-                lims[x + P] = -((jit[sr[x]] * np.int64(nrow[(x + ox) & nm])) >> 1)
-                act[na] = x + P
-                na += mov[x + P]
+            for x in range(P, P + W):
+                act[na] = x
+                na += mov[x]
             if na > 0:                          # (a row of inks 0 and 255 only: nothing to try)
                 # c_pe = kf * (sum over dy of yf[dy] e[r - dy]) + the same with kc, yc: the
                 # past rows' errors weighted along, then filtered across (exact in integers)
-                wf = yf[0]
-                wc = yc[0]
-                for x in range(L):
-                    ef[x] = wf * e[x]
-                    ec[x] = wc * e[x]
                 for dy in range(1, max(ryf, ryc) + 1):
                     er = rc[(r - dy) & m]
                     if dy <= min(ryf, ryc):     # both terms: the past row read once
@@ -318,7 +318,10 @@ class RowDBS:
         self.noise = np.ascontiguousarray(noise)
         self.offsets = np.ascontiguousarray(offsets, np.int64)
         self.passes, self.guard = int(passes), int(guard)
-        self.jitter = jitter_table(JITTER_KEYS if jitter is None else jitter)
+        jit = jitter_table(JITTER_KEYS if jitter is None else jitter)
+        if jit.min() < 0 or jit.max() * 255 >= 1 << 31:
+            raise ValueError("jitter strengths out of range (0 .. 2^31 / 255)")
+        self.jitter = jit.astype(np.int32)          # (int32 in the kernel: times 0..255)
 
     def jobs(self, band: np.ndarray, dots: np.ndarray, row0: int, groups: int):
         """Callables refining ``dots`` (vced's, for ``band`` at absolute row ``row0``) in
