@@ -4,8 +4,11 @@
 
 Per number of sweeps (rip/dbs.py `PASSES`, at most; 0: the filtered error only, vced's
 dots kept): the photo fine and coarse error of quality_bench.py (the same photographs,
-separation and eye model, in bands of 64 rows) and the refinement's CPU time per ink-pixel
-on one thread (vced's dots given; the photographs tiled to 1024 x 1536, best of 3).
+separation and eye model, in bands of 64 rows), the refinement's CPU time per ink-pixel
+on one thread (vced's dots given; the photographs tiled to 1024 x 1536, per band the
+least of 3 runs, summed: the least disturbed by other processes), and what the sweeps did
+there (the kernel's counts): the pixels that may change (ink 1..254), and per sweep the
+pixels tried and the changes made, per ink-pixel.
 """
 
 from __future__ import annotations
@@ -33,16 +36,19 @@ def vced(cmyk: np.ndarray) -> np.ndarray:
     return np.concatenate([h.process(cmyk[y:y + BAND]) for y in range(0, cmyk.shape[0], BAND)])
 
 
-def refine(cmyk: np.ndarray, dots: np.ndarray, sweeps: int) -> tuple[np.ndarray, float]:
-    """vced's dots refined in bands as the RIP does; (dots, CPU seconds)."""
+def refine(cmyk: np.ndarray, dots: np.ndarray, sweeps: int):
+    """vced's dots refined in bands as the RIP does; (dots, CPU seconds per band, the
+    kernel's counts summed over the inks)."""
     ref = Halftoner("dbs", 8, 4)._vc
     r = dbs.RowDBS(cmyk.shape[1], 4, ref.noise, ref.offsets, passes=sweeps)
     out = dots.copy()
-    t = time.process_time()
+    times = []
     for y in range(0, cmyk.shape[0], BAND):
+        t = time.thread_time()
         for job in r.jobs(cmyk[y:y + BAND], out[y:y + BAND], y, 1):
             job()
-    return out, time.process_time() - t
+        times.append(time.thread_time() - t)
+    return out, np.array(times), r.stats.sum(axis=0)
 
 
 def main(argv=None) -> int:
@@ -58,19 +64,26 @@ def main(argv=None) -> int:
     refine(big[:BAND], big_dots[:BAND], 1)                  # compile / load the kernel
     rows = []
     print(f"photographs: {source}; CPU on one thread, {big.shape[1]} x {big.shape[0]} x 4")
-    print(f"{'sweeps':>6} {'ns/ink-px':>10} {'photo fine':>11} {'photo coarse':>13}")
+    print(f"{'sweeps':>6} {'ns/ink-px':>10} {'photo fine':>11} {'photo coarse':>13}  "
+          f"per ink-pixel: may change, then each sweep's tries / changes")
     for sweeps in (int(s) for s in args.sweeps.split(",")):
         fine, coarse = [], []
         for name, cmyk in imgs:
-            dots, _ = refine(cmyk, base[name], sweeps)
+            dots, _, _ = refine(cmyk, base[name], sweeps)
             for k in range(4):
                 fine.append(hvs.rmse(dots[:, :, k], cmyk[:, :, k] / 255.0, hvs.FINE))
                 coarse.append(hvs.rmse(dots[:, :, k], cmyk[:, :, k] / 255.0, hvs.COARSE))
-        ns = min(refine(big, big_dots, sweeps)[1] for _ in range(3)) / big.size * 1e9
+        runs = [refine(big, big_dots, sweeps) for _ in range(3)]
+        ns = np.min([t for _, t, _ in runs], axis=0).sum() / big.size * 1e9
+        counts = runs[0][2] / big.size
+        active = float(counts[0])
+        per_sweep = [(round(float(t), 3), round(float(c), 4)) for t, c in zip(counts[1::2], counts[2::2])]
         rows.append(dict(sweeps=sweeps, ns_per_ink_pixel=round(ns, 1),
                          photo_fine=round(float(np.mean(fine)), 5),
-                         photo_coarse=round(float(np.mean(coarse)), 5)))
-        print(f"{sweeps:6d} {ns:10.1f} {np.mean(fine):11.5f} {np.mean(coarse):13.5f}", flush=True)
+                         photo_coarse=round(float(np.mean(coarse)), 5),
+                         may_change=round(active, 3), tries_changes=per_sweep))
+        print(f"{sweeps:6d} {ns:10.1f} {np.mean(fine):11.5f} {np.mean(coarse):13.5f}  {active:.3f} "
+              + " ".join(f"{t:.3f}/{c:.4f}" for t, c in per_sweep), flush=True)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(dict(date=time.strftime("%Y-%m-%d %H:%M"), photos=source, cpus=os.cpu_count(),

@@ -174,13 +174,15 @@ def _filter_across(out, e, k, P, W, add):
 
 @kernel()
 def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guard, noise,
-             offs, jit):  # pragma: no cover - compiled
+             offs, jit, stats):  # pragma: no cover - compiled
     """Refine channels c0..c1-1 of dst ((rows, W, ch) uint8 0/1, vced's dots on entry) in
     place against src ((rows, W, ch) uint8 ink); row0 the absolute row of src[0]; ring
     (ch, RING, W + 2 pad) int32: per ink the past rows' final error (255 dot - ink, zero in
-    the pad), row r in r & (RING - 1); the tables of ``filter_tables``; ``guard`` the tone
-    guard; noise (n, n) uint8, offs (ch, 2) int64: the jitter's mask and the inks' offsets in
-    it, jit (256,) int64 its strength per ink level (``jitter_table``)."""
+    the pad), row r in r & (RING - 1); the tables of ``filter_tables`` and ``update_table``;
+    ``guard`` the tone guard; noise (n, n) uint8, offs (ch, 2) int64: the jitter's mask and
+    the inks' offsets in it, jit (256,) int32 its strength per ink level (``jitter_table``);
+    stats (ch, 1 + 2 passes) int64, added to: per ink the pixels that may change, then per
+    pass the pixels tried and the changes made."""
     rows, W = src.shape[0], src.shape[1]
     ryf, ryc = yf.shape[0] - 1, yc.shape[0] - 1
     rx = k0.shape[0] // 2
@@ -251,14 +253,17 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guar
                 _filter_across(cpe, ef, kf, P, W, False)
                 _filter_across(cpe, ec, kc, P, W, True)
                 dirty[P:P + W] = 1
+            stats[c, 0] += na
             for it in range(passes if na > 0 else 0):
                 changes = 0
+                tries = 0
                 fwd = ((r + it) & 1) == 0
                 for k in range(na):
                     x = act[k] if fwd else act[na - 1 - k]
                     if dirty[x] == 0:
                         continue
                     dirty[x] = 0
+                    tries += 1
                     hx = np.int64(hp[x])
                     a = 1 - 2 * hx                  # +1: a dot is added, -1: removed
                     cx = np.int64(cpe[x])
@@ -294,6 +299,8 @@ def dbs_rows(src, dst, c0, c1, row0, ring, kf, yf, kc, yc, k0, upd, passes, guar
                             cv[j] += u[j]
                         lo = x - rx - 1 + min(off, 0)
                         dirty[lo:lo + 2 * rx + 3 + (off & 1)] = 1
+                stats[c, 1 + 2 * it] += tries
+                stats[c, 2 + 2 * it] += changes
                 if changes == 0:
                     break
             if na > 0:
@@ -313,6 +320,9 @@ class RowDBS:
         self.width, self.channels = int(width), int(channels)
         self.kf, self.yf, self.kc, self.yc, self.k0 = filter_tables(**filt)
         self.upd = update_table(self.k0)
+        # per ink: the pixels that may change (0 < ink < 255), then per pass the pixels tried
+        # and the changes made (what a pass costs: bench/dbs_sweeps.py)
+        self.stats = np.zeros((self.channels, 1 + 2 * max(int(passes), 0)), np.int64)
         pad = self.k0.size // 2 + 2
         self.ring = np.zeros((self.channels, RING, self.width + 2 * pad), np.int32)
         self.noise = np.ascontiguousarray(noise)
@@ -331,5 +341,5 @@ class RowDBS:
         return [lambda a=int(a), b=int(b): dbs_rows(
                     band, dots, a, b, int(row0), self.ring, self.kf, self.yf, self.kc,
                     self.yc, self.k0, self.upd, self.passes, self.guard, self.noise, self.offsets,
-                    self.jitter)
+                    self.jitter, self.stats)
                 for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
