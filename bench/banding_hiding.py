@@ -49,7 +49,7 @@ from wideprint.app.quality import measure_scan
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.physical import PhysicalModel
 from wideprint.rip import swath
-from wideprint.rip.masks import hiding_weights, load_bluenoise_mask, stroke_error_um
+from wideprint.rip.masks import HIDE_FEED_NOISE_UM, hiding_weights, load_bluenoise_mask, stroke_error_um
 from wideprint.rip.profile import load_profile
 from wideprint.rip.stroke_hiding import StrokeClasses, StrokeMasks, stroke_hiding_weights
 from wideprint.rip.testprints import scan_layout
@@ -133,6 +133,7 @@ def _profile_args() -> list[str]:
 
 PROFILE: list[str] = []     # the profile test prints use (--whole-step-feed)
 INJECT: list[str] = []      # the machine's errors overridden (--inject, e.g. feed-noise=0um)
+FEED_NOISE_UM = [HIDE_FEED_NOISE_UM]    # the feed noise the per-stroke shares are robust to
 
 
 def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np.ndarray, np.ndarray]:
@@ -210,8 +211,10 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
     shares = dict(hiding=lambda: hiding_weights(dy_m, vol_m, sl, stroke_error_um=stroke),
                   oracle=lambda: hiding_weights(dy_t, vol_t, sl, stroke_error_um=stroke))
     classes = StrokeClasses.of(load_profile(PROFILE[0]) if PROFILE else profile, passes)
-    shares["stroke-hiding"] = lambda: stroke_hiding_weights(dy_m, vol_m, sl, classes.class_errors_um())
-    shares["stroke-oracle"] = lambda: stroke_hiding_weights(dy_t, vol_t, sl, classes.class_errors_um())
+    shares["stroke-hiding"] = lambda: stroke_hiding_weights(dy_m, vol_m, sl, classes.class_errors_um(),
+                                                            feed_noise_um=FEED_NOISE_UM[0])
+    shares["stroke-oracle"] = lambda: stroke_hiding_weights(dy_t, vol_t, sl, classes.class_errors_um(),
+                                                            feed_noise_um=FEED_NOISE_UM[0])
     for name in masks:
         weights = shares[name]() if name in shares else None
         _HIDING.clear()
@@ -226,7 +229,7 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
             _HIDING.clear()
             _STROKE.clear()
         r.update(machine=machine, seed=seed, passes=passes, mask=name, nozzle_check=err,
-                 whole_step_feed=bool(PROFILE), inject=list(INJECT),
+                 whole_step_feed=bool(PROFILE), inject=list(INJECT), feed_noise_um=FEED_NOISE_UM[0],
                  sum_w2=None if weights is None else round(float((weights ** 2).sum(axis=2).mean()), 4))
         out.append(r)
         print(f"  {name:8s} banding {r['banding']:.3f} (worst {r['banding_max']:.3f}) advance "
@@ -246,10 +249,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="of " + ", ".join(MASK_NAMES + STROKE_MASKS[1:]))
     ap.add_argument("--inject", action="append", default=[],
                     help="override one of the machine's errors (docs/physical.md), e.g. feed-noise=0um")
+    ap.add_argument("--feed-noise-um", type=float, default=HIDE_FEED_NOISE_UM,
+                    help="the feed's random error (µm a feed) the per-stroke shares are robust to")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     profile = load_profile()
     INJECT[:] = args.inject
+    FEED_NOISE_UM[:] = [args.feed_noise_um]
     swath.StrokePlanner._pass_mask = _pass_mask
     swath.StrokePlanner._stroke_mask = _stroke_mask
     runs: list[dict] = []
