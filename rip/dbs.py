@@ -29,8 +29,10 @@ change, and makes it causal by rows:
   and along, ``W_k = sum over the counted rows dy of g(dy) g(dy + k)``: ``c_pe`` of a row
   is the past rows' errors and its own weighted along (a ring of ``RING`` rows per ink),
   then filtered across, once for the fine and once for the coarse term (the same integers
-  as filtering each row across first: 59 multiply-adds a pixel instead of 80), and a change
-  updates 23 cells of one row.  Both cut at ``TRUNCATE`` sigma.
+  as filtering each row across first: 23 multiply-adds along, and across 18 multiplies, the
+  kernels being symmetric and tap pairs summed first; 80 multiply-adds filtering first), and
+  a change updates 23 cells of one row (24 for a swap), one add of a precomputed row
+  (``update_table``).  Both cut at ``TRUNCATE`` sigma.
 * **Tone**: the eye model cannot justify a lone dot in a very light tint (its gain within
   the filter's reach is below its own cost; full-image DBS drops tints below ~2 %, which
   the fine-scale score rewards and a print would not).  So dots are added or removed only
@@ -47,8 +49,9 @@ Integer arithmetic throughout (weights in 1/1024, errors in ink levels, sums in 
 the bound checked), so the dots are bit-exact, platform independent and the same from the
 compiled and the JIT kernel.  The trial of a pixel is branch-free (which neighbour differs is
 a coin toss a branch predictor loses), and only pixels of ink 1..254 are tried (0 and 255
-cannot change): the same dots as the first kernel, ~20 % less time.  Measured:
-bench/README.md, "dbs" (and why half of vced's speed is out of reach).
+cannot change).  What the time goes to, and why half of vced's speed is out of reach for a
+search of this kind: bench/README.md, "Halftone against DBS" (bench/dbs_sweeps.py; the
+kernel counts its tries and changes in ``RowDBS.stats``).
 """
 
 from __future__ import annotations
