@@ -139,6 +139,12 @@ def test_the_stroke_classes_know_each_strokes_landing_error(profile):
     width = np.diff(np.append(cl.edges, 1.0)).max()
     assert np.abs(off).max() <= profile.feed_um_per_step * width / 2 + 1e-6
     assert cl.count <= STROKE_BINS + 4
+    # a top margin moves every target (driver/job.py: feed_steps_for_rows(i A + top))
+    top = StrokeClasses.of(profile, 4, top_rows=37)
+    steps = np.array([profile.feed_steps_for_rows(int(i * a + 37)) for i in range(603)])
+    driver = steps * profile.feed_um_per_step - (np.arange(603) * a + 37) * profile.row_um
+    assert np.allclose(top.block_errors_um(blocks), driver[blocks[:, None] + np.arange(4)], atol=1e-6)
+    assert not np.allclose(top.block_errors_um(blocks), exact, atol=1.0)
 
 
 def test_stroke_shares_are_shares_and_cancel_the_strokes_errors_too(profile):
