@@ -14,7 +14,10 @@ Whole commands as users run them (issue 36's speed rule: a new method at no less
 of vced's speed): rip_bench.py's generated photo-like RGB TIFF, then `wideprint rip IMG -o
 PLANES.tif --size pixels --dither M` for each method in turn, round after round (so a busy
 machine slows every method alike), each a fresh process: wall and CPU seconds (the process
-and its children); the medians and each method's against the first.
+and its children); the medians and each method's against the first.  `M@DIR` runs method M
+from another checkout, the package DIR/wideprint (e.g. `git archive` of an earlier commit
+with its kernels built: `PYTHONPATH=DIR python tools/build_kernels.py` there), for a
+before / after in the same rounds.
 """
 
 from __future__ import annotations
@@ -58,17 +61,26 @@ def whole_commands(methods: list[str], width: int, height: int, repeat: int, out
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from rip_bench import TestImage, cli_env, run_measured, wideprint_cmd, write_tiff
     env = cli_env()
+    envs = {}
+    for m in methods:                       # M@DIR: the package DIR/wideprint
+        where = m.partition("@")[2]
+        envs[m] = env if not where else dict(env, PYTHONPATH=os.path.abspath(where))
+        if where and not os.path.isfile(os.path.join(where, "wideprint", "__init__.py")):
+            print(f"halftone_bench: {m}: no package {where}/wideprint", file=sys.stderr)
+            return 2
     runs: dict[str, list] = {m: [] for m in methods}
+
+    def rip(m: str, out: str):
+        return run_measured(wideprint_cmd("rip", img, "-o", out, "--size", "pixels", "--dither",
+                                          m.partition("@")[0]), env=envs[m])
     with tempfile.TemporaryDirectory(prefix="halftone_bench_") as d:
         img = os.path.join(d, "in.tif")
         write_tiff(img, TestImage(width, height))
         for m in methods:                                  # warm the caches (not counted)
-            run_measured(wideprint_cmd("rip", img, "-o", os.path.join(d, "p.tif"), "--size",
-                                       "pixels", "--dither", m), env=env)
+            rip(m, os.path.join(d, "p.tif"))
         for _ in range(repeat):
-            for m in methods:
-                r = run_measured(wideprint_cmd("rip", img, "-o", os.path.join(d, f"{m}.tif"),
-                                               "--size", "pixels", "--dither", m), env=env)
+            for k, m in enumerate(methods):
+                r = rip(m, os.path.join(d, f"{k}.tif"))
                 if not r.ok:
                     print(r.err[-2000:], file=sys.stderr)
                     return 1
