@@ -77,7 +77,8 @@ def _pass_mask(self, mask):
     the random mask, unequal shares)."""
     stroke = _STROKE.get(self.n)
     if stroke is not None and mask == "random":
-        self._stroke_masks = StrokeMasks(self, *stroke)
+        weights, classes = stroke
+        self._stroke_masks = StrokeMasks(self.n, self._remap, weights, classes, self.s0)
         return self._stroke_masks.qmask, self._stroke_masks.sel[0]
     weights = _HIDING.get(self.n)
     if weights is None or mask != "random":

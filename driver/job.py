@@ -23,7 +23,7 @@ from .stream import StreamError, StrokeStreamer
 from ..rip.load import ImageError
 from ..rip.pipeline import RipJob, prefetch
 from ..rip.profile import ProfileError
-from ..rip.swath import StrokeData
+from ..rip.swath import StrokeData, top_margin_rows
 
 log = logging.getLogger("wideprint.job")
 
@@ -256,7 +256,7 @@ class PrintJob:
 
     def top_rows(self) -> int:
         """Blank rows of paper before the image's first row (placement top_mm)."""
-        return int(round(float(self.rip.settings.placement.top_mm) * 1000 / self.profile.row_um))
+        return top_margin_rows(self.profile, self.rip.settings)
 
     def feed_to(self, target_steps: int) -> None:
         st = self.printer.status()

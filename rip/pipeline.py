@@ -22,7 +22,7 @@ from .printable import PrintableJob  # the base (rip/printable.py); re-exported 
 from .profile import COLORS, Profile, load_profile
 from .screen import OrderedScreen
 from .settings import Placement, RipSettings  # noqa: F401 - re-exported: the settings schema's objects
-from .swath import StrokePlanner, pack_dots, unpack_dots
+from .swath import StrokePlanner, pack_dots, top_margin_rows, unpack_dots
 
 
 BAND_PIXELS = 1 << 19     # pixels per band, at most (RipJob.band_rows)
@@ -190,7 +190,8 @@ class RipJob(PrintableJob):
     def planner(self) -> StrokePlanner:
         s = self.settings
         return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                             s.pass_mask, dead_rows_empty=self._dead_rows() is not None)
+                             s.pass_mask, dead_rows_empty=self._dead_rows() is not None,
+                             top_rows=top_margin_rows(self.profile, s))
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         """The halftoned image, top to bottom, as (h, W, 4) uint8 0/1 bands (rows only dead

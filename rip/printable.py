@@ -13,7 +13,7 @@ import numpy as np
 from .planes import PlanesWriter
 from .profile import Profile
 from .settings import RipSettings
-from .swath import StrokeData, StrokePlanner, pack_dots
+from .swath import StrokeData, StrokePlanner, pack_dots, top_margin_rows
 
 
 class PrintableJob:
@@ -41,7 +41,7 @@ class PrintableJob:
     def planner(self) -> StrokePlanner:
         s = self.settings
         return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                             s.pass_mask)
+                             s.pass_mask, top_rows=top_margin_rows(self.profile, s))
 
     def strokes(self, planner: StrokePlanner | None = None) -> Iterator[StrokeData]:
         planner = planner or self.planner()

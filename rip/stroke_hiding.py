@@ -23,7 +23,8 @@ pass fires each changes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -134,14 +135,16 @@ MASK_LEVELS = 256           # as rip/swath.py's random mask: the blue-noise tile
 class StrokeMasks:
     """The planner's selection per stroke from per-class shares: `__call__(i)` gives stroke
     i's (mask_rows, mask_index, sel) for rip/swath.py's packers, indexed by the image row
-    modulo N A (a stroke's rows are N A consecutive rows, each block with its class's)."""
+    modulo N A (a stroke's rows are N A consecutive rows, each block with its class's).
+    `remap` (4, A, N) is the planner's dead-nozzle remap, `s0` its first used slot."""
 
-    def __init__(self, planner, weights: np.ndarray, classes: StrokeClasses):
-        n, a = planner.n, planner.advance
+    def __init__(self, passes: int, remap: np.ndarray, weights: np.ndarray,
+                 classes: StrokeClasses, s0: int):
+        n, a = passes, remap.shape[1]
         if weights.shape[1:] != (4, a, n) or classes.advance != a or classes.passes != n:
             raise ValueError(f"stroke shares {weights.shape} do not fit the planner's "
                              f"{n} passes of {a} rows")
-        self.n, self.a, self.classes = n, a, classes
+        self.n, self.a, self.s0, self.classes = n, a, s0, classes
         ranks = load_bluenoise_mask()
         self.qmask = np.ascontiguousarray(
             (ranks.astype(np.int64) * MASK_LEVELS // ranks.size).astype(np.int16))
@@ -151,8 +154,8 @@ class StrokeMasks:
         for c in range(4):
             cum = np.cumsum(weights[:, c] / weights[:, c].sum(axis=2, keepdims=True), axis=2)
             jsel = np.minimum((u[None, None, :, None] > cum[:, :, None, :]).sum(axis=3), n - 1)
-            remap = np.broadcast_to(planner._remap[c], (k, a, n))
-            sel[:, c] = np.take_along_axis(remap, jsel.astype(np.int64), axis=2)
+            rc = np.broadcast_to(remap[c], (k, a, n))
+            sel[:, c] = np.take_along_axis(rc, jsel.astype(np.int64), axis=2)
         self.sel = sel
         # the packed bits of each distinct selection, as StrokePlanner._mask_bit_rows
         th, tw = self.qmask.shape
@@ -163,12 +166,19 @@ class StrokeMasks:
             rows[i] = np.packbits(srow[self.qmask][:, None, :] == j, axis=-1)
         self.rows = rows
         self.index = index.reshape(k, 4, a).astype(np.int64)
-        self.top_row = planner.top_row
-        self.s0 = planner.s0
+        for arr in (self.sel, self.rows, self.index):
+            arr.setflags(write=False)
+
+    def at_top(self, top_rows: int) -> StrokeMasks:
+        """The same selections with the blocks' classes placed for a job whose top margin
+        is `top_rows` (the planes are shared, not copied)."""
+        out = copy.copy(self)
+        out.classes = replace(self.classes, top_rows=int(top_rows))
+        return out
 
     def __call__(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, a = self.n, self.a
-        rr = self.top_row(i) + self.s0 + np.arange(n * a)     # the rows under the used run
+        rr = (i - n + 1) * a + np.arange(n * a)     # the image rows under the used run
         pos = rr % (n * a)
         cls = self.classes.of_blocks(rr // a)
         index = np.empty((4, n * a), np.int64)

@@ -42,6 +42,12 @@ FEATHER = 0.25              # fraction of the nozzle run, at each end, that fade
 SHINGLE_TAPER = {2: 1.0, 3: 1.0, 4: 1.0, 6: 1.0, 8: 1.0}
 
 
+def top_margin_rows(profile: Profile, settings) -> int:
+    """The job's top margin in rows (placement top_mm): the driver feeds stroke i to
+    `feed_steps_for_rows(i A + top_margin_rows)` (driver/job.py), the hiding mask plans for it."""
+    return int(round(float(settings.placement.top_mm) * 1000 / profile.row_um))
+
+
 @dataclass
 class StrokeData:
     index: int            # stroke number in the job, 0-based (blank strokes keep their number)
@@ -60,7 +66,8 @@ class StrokePlanner:
     """Plans the carriage strokes of a job from the weave's passes (N = `passes`)."""
 
     def __init__(self, profile: Profile, width: int, height: int, dpi: int, passes: int = 1,
-                 bidir: bool = False, mask: str = "checker", dead_rows_empty: bool = False):
+                 bidir: bool = False, mask: str = "checker", dead_rows_empty: bool = False,
+                 top_rows: int = 0):
         if passes not in PASS_COUNTS:
             raise ValueError(f"passes must be one of {PASS_COUNTS}, not {passes}")
         if mask not in PASS_MASKS:
@@ -82,6 +89,10 @@ class StrokePlanner:
         self._dead_rows_empty = dead_rows_empty
         self._remap = self._dead_nozzle_remap()
         self.mask = mask
+        # the job's top margin (driver/job.py `top_rows`): the driver feeds stroke i to
+        # `feed_steps_for_rows(i A + top_rows)`, whose rounding the hiding shares follow
+        self.top_rows = int(top_rows)
+        self._stroke_masks = None           # hiding: the selection per stroke (rip/hiding.py)
         self._qmask, self._sel = self._pass_mask(mask)
         self._mask_rows, self._mask_index = self._mask_bit_rows()
         # whole 8 x 8 blocks of dots move at once (`_pack_stroke_blocks`); the per-dot kernel
@@ -175,11 +186,14 @@ class StrokePlanner:
             qmask = (ranks.astype(np.int64) * MASK_LEVELS // ranks.size).astype(np.int16)
             u = (np.arange(MASK_LEVELS) + 0.5) / MASK_LEVELS
             if mask == "hiding":
-                # the measured nozzles' shares, per colour (rip/hiding.py); no measurement
-                # stored is an error naming `calibrate nozzles`, never another mask
-                from .hiding import hiding_shares
-                weights = hiding_shares(self.profile, n)
-            elif mask == "random" or n == 1:
+                # the measured nozzles' shares per block of strokes and colour
+                # (rip/hiding.py); no measurement stored is an error naming `calibrate
+                # nozzles`, never another mask.  `_sel` is the first class's (the selection
+                # of a stroke is `_stroke_mask`'s)
+                from .hiding import stroke_masks
+                self._stroke_masks = stroke_masks(self.profile, n, self._remap, self.top_rows)
+                return self._stroke_masks.qmask, self._stroke_masks.sel[0]
+            if mask == "random" or n == 1:
                 weights = np.ones((a, n))
             elif mask == "shingle":
                 weights = shingle_weights(n, a)
@@ -205,6 +219,8 @@ class StrokePlanner:
         is the same share a row set (without dead nozzles or feathering there is one)."""
         th, tw = self._qmask.shape
         assert tw % 8 == 0, "the pass mask tile must be whole bytes wide"
+        if self._stroke_masks is not None:
+            return self._stroke_masks.rows, self._stroke_masks.index[0]
         sel = self._sel.reshape(-1, self._sel.shape[-1])               # (4 * A, levels)
         unique, index = np.unique(sel, axis=0, return_inverse=True)
         rows = np.empty((len(unique), th, self.n, tw // 8), np.uint8)
@@ -217,8 +233,10 @@ class StrokePlanner:
     def _stroke_mask(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Stroke i's selection: (mask rows, mask index, sel) as `_mask_bit_rows` and
         `_pass_mask` give them, the index and sel per colour and image row modulo their
-        length: the same for every stroke, per row phase (r mod A).  Per-stroke shares
-        (rip/stroke_hiding.py) give the N A rows of a stroke their own (r mod N A)."""
+        length: the same for every stroke, per row phase (r mod A).  The hiding shares
+        (per stroke, rip/stroke_hiding.py) give the N A rows of a stroke their own (r mod N A)."""
+        if self._stroke_masks is not None:
+            return self._stroke_masks(i)
         return self._mask_rows, self._mask_index, self._sel
 
     # -- streaming ----------------------------------------------------------------------

@@ -224,3 +224,35 @@ def test_the_block_packer_plans_hiding_as_the_per_dot_kernel(tmp_path):
     assert_same_strokes(fast, slow, dots)
     planner = StrokePlanner(prof, 131, 400, 300, 4, mask="hiding")
     assert len(np.unique(planner._sel.reshape(-1, planner._sel.shape[-1]), axis=0)) > 4 * 50
+
+
+def test_hiding_plans_the_strokes_the_driver_feeds(tmp_path):
+    """The per-stroke shares' classes follow the feeds the print really makes: with a 5 mm
+    top margin (73 rows: every block's feed rounding shifted) the emulator's paper position
+    at each printed stroke is the classes' whole-step target `round((i A + top) steps/row)`,
+    which a plan for no margin misses; the same dots land as the planes."""
+    prof = measured_profile(tmp_path)
+    img = tmp_path / "img.tif"
+    tifffile.imwrite(img, np.random.default_rng(2).integers(0, 256, (700, 120, 3), dtype=np.uint8),
+                     resolution=(300, 300))
+    settings = dict(passes=4, pass_mask="hiding", dpi=300, placement=dict(top_mm=5))
+    res = api.print_file(img, settings, profile=prof)
+    assert res.ok and api.compare(res.media, api.rip(img, dict(passes=4, dpi=300), profile=prof)).equal
+    paper, at = None, {}
+    for e in res.events:
+        if e["event"] == "feed":
+            paper = e["paper_steps"]
+        elif e["event"] == "line":
+            at[e["stroke"]] = paper
+    from wideprint.rip.pipeline import RipJob
+    classes = RipJob(str(img), api.rip_settings(settings, prof), prof).planner()._stroke_masks.classes
+    assert classes.top_rows == 73 and len(at) > 10
+
+    def targets(cl):
+        i = np.array(sorted(at))
+        x = (i * cl.advance + cl.top_rows) * cl.row_steps
+        return np.floor(x + 0.5) - np.floor(x[0] + 0.5)
+    fed = np.array([at[i] for i in sorted(at)]) - at[min(at)]
+    assert np.array_equal(targets(classes), fed)
+    from dataclasses import replace
+    assert not np.array_equal(targets(replace(classes, top_rows=0)), fed)

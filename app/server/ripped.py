@@ -25,7 +25,7 @@ import numpy as np
 
 from ...rip.planes import iter_planes
 from ...rip.printable import PrintableJob
-from ...rip.swath import StrokePlanner
+from ...rip.swath import StrokePlanner, top_margin_rows
 from .validate import job_rip_settings
 
 log = logging.getLogger("wideprint.server")
@@ -60,7 +60,8 @@ class PlanesJob(PrintableJob):
     def planner(self) -> StrokePlanner:
         s = self.settings
         return StrokePlanner(self.profile, self.width, self.height, s.dpi, s.passes, s.bidir,
-                             s.pass_mask, dead_rows_empty=self.dead_rows_empty)
+                             s.pass_mask, dead_rows_empty=self.dead_rows_empty,
+                             top_rows=top_margin_rows(self.profile, s))
 
     def halftone_bands(self) -> Iterator[np.ndarray]:
         yield from iter_planes(self.planes)
