@@ -2,11 +2,13 @@
 
     .venv/bin/python bench/banding_hiding.py [--machines typical,tired] [--seeds 1,2]
         [--passes 4] [--masks checker,...,stroke-hiding] [--out bench/results/banding_hiding.json]
+    .venv/bin/python bench/banding_hiding.py --setting 2,3,4,6,8 [--machines ...] [--seeds ...]
+        [--out bench/results/banding_hiding_setting.json]     # `--pass-mask hiding` as a user runs it
 
 Per machine (docs/physical.md "The machine", drawn from the seed):
 1. the nozzle check is printed on it and scanned at 1200 dpi; every nozzle's dash is
-   measured as `calibrate nozzles` measures it (app/calibrate.py: its centroid through the
-   frame bars' registration, its ink; in a window 4 rows high each side): the nozzle's
+   measured by `calibrate nozzles`' own code (app/nozzles.py `measure_nozzle_errors`: its
+   centroid through the frame bars' registration, its ink; in a window 4 rows high each side): the nozzle's
    landing error along the feed (µm, the dash's y less its cell's) and its drop volume (the
    dash's ink over its colour's median, to the power 3/2: a dot's ink is its area);
 2. `rip.masks.hiding_weights` turns them into each row phase's shares per pass, so that
@@ -16,7 +18,8 @@ Per machine (docs/physical.md "The machine", drawn from the seed):
    "oracle" does the same from the machine's true errors (the bound of what the measurement
    could give); "stroke-hiding" (`rip.stroke_hiding`) gives each block of A rows its own
    shares from the known error of each of its strokes, so that the rounding cancels with the
-   nozzles' errors row by row ("stroke-oracle": from the true errors);
+   nozzles' errors row by row ("stroke-oracle": from the true errors): what
+   `--pass-mask hiding` plans (rip/hiding.py `stroke_masks`);
 3. the banding chart is printed at --passes with the checkerboard (today's default), the
    random mask (the same blue-noise split with equal shares) and the hiding shares, scanned
    at 600 dpi, and measured by `wideprint quality` (app/quality.py): the mean over the ten
@@ -45,31 +48,21 @@ import numpy as np
 
 from wideprint.app.calibrate import Scan, read_scan_white
 from wideprint.app.cli import main as wideprint
+from wideprint.app.nozzles import measure_nozzle_errors
 from wideprint.app.quality import measure_scan
 from wideprint.device_sim.faults import Faults
 from wideprint.device_sim.physical import PhysicalModel
 from wideprint.rip import swath
+from wideprint.rip.hiding import live_slots
 from wideprint.rip.masks import HIDE_FEED_NOISE_UM, hiding_weights, load_bluenoise_mask, stroke_error_um
 from wideprint.rip.profile import load_profile
 from wideprint.rip.stroke_hiding import StrokeClasses, StrokeMasks, stroke_hiding_weights
 from wideprint.rip.testprints import scan_layout
 
 NOZZLE_DPI, NOZZLE_WIDTH_MM, NOZZLE_SCAN_DPI = 150, 200, 1200
-WINDOW_ROWS = 4
 CHART_DPI, CHART_WIDTH_MM, CHART_SCAN_DPI = 300, 100, 600
 _HIDING: dict = {}          # passes -> (4, A, N) shares, while a run prints with them
 _STROKE: dict = {}          # passes -> ((K, 4, A, N) shares, StrokeClasses): per stroke
-
-
-def slots(profile, passes: int) -> np.ndarray:
-    """(4, A, N, 2): the (head, nozzle) that prints colour c's row phase r in pass j
-    (rip/swath.py: slot r + (N - 1 - j) A + s0)."""
-    s0, s1 = profile.usable_slots()
-    a = (s1 - s0) // passes
-    table = profile.slot_table()
-    r = np.arange(a)[:, None]
-    j = np.arange(passes)[None, :]
-    return table[:, r + (passes - 1 - j) * a + s0]
 
 
 def _pass_mask(self, mask):
@@ -138,7 +131,8 @@ FEED_NOISE_UM = [HIDE_FEED_NOISE_UM]    # the feed noise the per-stroke shares a
 
 
 def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np.ndarray, np.ndarray]:
-    """(dy µm, volume) per (head, nozzle), from a 1200 dpi scan of the nozzle check."""
+    """(dy µm, volume) per (head, nozzle), from a 1200 dpi scan of the nozzle check, as
+    `calibrate nozzles` measures them (app/nozzles.py; volume 0: no dash, dead)."""
     scan = os.path.join(workdir, f"nc-{machine}-{seed}.tif")
     _cli(["test-print", "nozzle-check", "--dpi", str(NOZZLE_DPI), "--width-mm", str(NOZZLE_WIDTH_MM),
           "--scan-out", scan, "--scan-dpi", str(NOZZLE_SCAN_DPI),
@@ -147,26 +141,10 @@ def measured_nozzles(machine: str, seed: int, workdir: str, profile) -> tuple[np
     width = int(round(NOZZLE_WIDTH_MM / 25.4 * profile.counts_per_inch / k))
     layout = scan_layout("nozzle-check", profile, width, NOZZLE_DPI)
     dark, white, sdpi = read_scan_white(scan)
-    sc = Scan(dark, sdpi, layout, profile, NOZZLE_DPI, white)
-    shape = (len(profile.heads), profile.nozzles)
-    dy, ink = np.zeros(shape), np.full(shape, np.nan)
-    index = {h.name: h.index for h in profile.heads}
-    for m in layout.marks:
-        # as `calibrate nozzles` measures a dash, in a window 4 rows high each side (the next
-        # dash of its staircase step is 16 rows away): a crooked nozzle's dash stays whole
-        wgt, mx, my = sc.window(m, 0.0, WINDOW_ROWS * sc.row_um, sc.band(m.channel))
-        if wgt.sum() > 0:
-            dy[index[m.head], m.nozzle] = (wgt * my).sum() / wgt.sum() - sc.model_centroid(m)[1]
-            ink[index[m.head], m.nozzle] = wgt.sum()
     os.unlink(scan)
-    volume = np.ones(shape)
-    for ch in range(4):
-        heads = [h.index for h in profile.heads if h.channel == ch]
-        med = np.nanmedian(ink[heads])
-        volume[heads] = np.nan_to_num((ink[heads] / med) ** 1.5, nan=1.0)
     # a head's mean y error is its offset (what `calibrate heads` trims); kept: it is the
     # rows' error too
-    return dy, volume
+    return measure_nozzle_errors(Scan(dark, sdpi, layout, profile, NOZZLE_DPI, white))
 
 
 def true_nozzles(machine: str, seed: int, profile) -> tuple[np.ndarray, np.ndarray]:
@@ -194,8 +172,8 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
         masks: tuple[str, ...] = MASK_NAMES) -> list[dict]:
     t0 = time.perf_counter()
     out = []
-    sl = slots(profile, passes)
     dy_m, vol_m = measured_nozzles(machine, seed, workdir, profile)
+    sl = live_slots(profile, passes, vol_m)
     dy_t, vol_t = true_nozzles(machine, seed, profile)
     live = sl[..., 0] >= 0
     used = (sl[..., 0][live], sl[..., 1][live])
@@ -239,6 +217,56 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
     return out
 
 
+SETTING_MASKS = ("checker", "hiding", "hiding-per-row-phase")
+
+
+def run_setting(machine: str, seed: int, passes_list: list[int], workdir: str) -> list[dict]:
+    """`--pass-mask hiding` as a user runs it: the nozzle check scanned at 1200 dpi,
+    `wideprint calibrate nozzles --write` into a copy of the profile, then the banding chart
+    printed with checker and hiding on that profile and measured by `wideprint quality`.
+    "hiding-per-row-phase": the same stored measurement through the shares per row phase
+    (rip/hiding.py `hiding_shares`, what the setting planned before the per-stroke shares)."""
+    from wideprint.rip.hiding import hiding_shares
+    from wideprint.rip.profile import DEFAULT_PROFILE
+    t0 = time.perf_counter()
+    prof_path = os.path.join(workdir, f"printer-{machine}-{seed}.toml")
+    Path(prof_path).write_text(Path(DEFAULT_PROFILE).read_text())
+    scan = os.path.join(workdir, f"nc-{machine}-{seed}.tif")
+    machine_args = ["--inject", f"machine={machine}", "--inject", f"seed={seed}"]
+    _cli(["test-print", "nozzle-check", "--dpi", str(NOZZLE_DPI), "--width-mm", str(NOZZLE_WIDTH_MM),
+          "--scan-out", scan, "--scan-dpi", str(NOZZLE_SCAN_DPI)] + machine_args)
+    _cli(["calibrate", "nozzles", "--scan", scan, "--width-mm", str(NOZZLE_WIDTH_MM), "--write",
+          "--profile", prof_path])
+    os.unlink(scan)
+    profile = load_profile(prof_path)
+    out = []
+    for passes in passes_list:
+        for name in SETTING_MASKS:
+            _HIDING.clear()
+            if name == "hiding-per-row-phase":
+                _HIDING[passes] = hiding_shares(profile, passes)
+            mask = dict(checker="checker", hiding="hiding").get(name, "random")
+            chart_scan = os.path.join(workdir, f"chart-{machine}-{seed}-{passes}-{name}.tif")
+            try:
+                _cli(["test-print", "banding-scan", "--dpi", str(CHART_DPI), "--passes", str(passes),
+                      "--pass-mask", mask, "--width-mm", str(CHART_WIDTH_MM), "--scan-out", chart_scan,
+                      "--scan-dpi", str(CHART_SCAN_DPI), "--profile", prof_path] + machine_args)
+            finally:
+                _HIDING.clear()
+            with contextlib.redirect_stdout(io.StringIO()) as buf:
+                rc = wideprint(["quality", chart_scan, "--passes", str(passes), "--json"])
+            os.unlink(chart_scan)
+            if rc != 0:
+                raise SystemExit(f"wideprint quality failed ({rc}) on {chart_scan}")
+            summary = json.loads(buf.getvalue())["summary"]
+            out.append(dict(machine=machine, seed=seed, passes=passes, mask=name,
+                            banding=summary["banding"], banding_max=summary.get("banding_max"),
+                            graininess=summary.get("graininess")))
+            print(f"  {machine} seed {seed} {passes} passes {name:22s} banding {summary['banding']:.3f}"
+                  f"  {time.perf_counter() - t0:.0f} s", flush=True)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--machines", default="typical,tired")
@@ -252,6 +280,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="override one of the machine's errors (docs/physical.md), e.g. feed-noise=0um")
     ap.add_argument("--feed-noise-um", type=float, default=HIDE_FEED_NOISE_UM,
                     help="the feed's random error (µm a feed) the per-stroke shares are robust to")
+    ap.add_argument("--setting", default=None, metavar="PASSES",
+                    help="measure --pass-mask hiding as a user runs it (calibrate nozzles, then "
+                         "the chart with checker and hiding) at these pass counts, e.g. 2,3,4,6,8")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     profile = load_profile()
@@ -262,9 +293,15 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[dict] = []
     try:
         with tempfile.TemporaryDirectory(prefix="wideprint-hiding-") as d:
-            if args.whole_step_feed:
+            if args.setting:
+                for machine in args.machines.split(","):
+                    for seed in (int(s) for s in args.seeds.split(",")):
+                        runs += run_setting(machine, seed, [int(p) for p in args.setting.split(",")], d)
+                        if args.out:
+                            Path(args.out).write_text(json.dumps(dict(runs=runs), indent=1) + "\n")
+            elif args.whole_step_feed:
                 PROFILE[:] = [whole_step_profile(d, args.passes)]
-            for machine in args.machines.split(","):
+            for machine in args.machines.split(",") if not args.setting else ():
                 for seed in (int(s) for s in args.seeds.split(",")):
                     runs += run(machine, seed, args.passes, d, profile,
                                 masks=tuple(args.masks.split(",")))

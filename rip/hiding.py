@@ -45,15 +45,20 @@ def measured_errors(profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     return dy, 1.0 + pct / 100.0
 
 
-def _measured_slots(profile: Profile, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(dy, volume, slots) with the nozzles the measurement found without drops (volume 0:
-    dead) out of the slots, as the profile's dead nozzles (which the slot table leaves out)."""
-    dy, volume = measured_errors(profile)
+def live_slots(profile: Profile, passes: int, volume: np.ndarray) -> np.ndarray:
+    """`weave_slots` with the nozzles a measurement found without drops (volume 0: dead)
+    out, as the profile's dead nozzles (which the slot table leaves out)."""
     slots = weave_slots(profile, passes).copy()
     h, z = slots[..., 0], slots[..., 1]
     dry = (h >= 0) & (volume[np.maximum(h, 0), z] <= 0)
     slots[dry] = -1
-    return dy, volume, slots
+    return slots
+
+
+def _measured_slots(profile: Profile, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dy, volume, live slots) from the profile's stored measurement."""
+    dy, volume = measured_errors(profile)
+    return dy, volume, live_slots(profile, passes, volume)
 
 
 def _key(*arrays) -> str:

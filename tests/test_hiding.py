@@ -11,6 +11,7 @@ import pytest
 
 from wideprint.app import api
 from wideprint.rip import swath
+from wideprint.rip.hiding import weave_slots
 from wideprint.rip.masks import hiding_weights, stroke_error_um
 from wideprint.rip.profile import load_profile
 from wideprint.rip.stroke_hiding import STROKE_BINS, StrokeClasses, stroke_hiding_weights
@@ -45,7 +46,7 @@ def row_errors(w, dy, vol, sl):
 
 
 def test_shares_are_shares_and_equal_without_errors(profile):
-    sl = bench.slots(profile, 4)
+    sl = weave_slots(profile, 4)
     shape = (len(profile.heads), profile.nozzles)
     w = hiding_weights(np.zeros(shape), np.ones(shape), sl)
     assert w.shape == (4, sl.shape[1], 4) and np.allclose(w, 0.25)
@@ -58,7 +59,7 @@ def test_shares_are_shares_and_equal_without_errors(profile):
 def test_the_rows_errors_cancel_where_equal_shares_average_them(profile):
     """The typical machine's spreads (3 µm, 3 %): every row's mean landing error and volume
     is brought near its colour's mean; equal shares leave each row the mean of 4 nozzles."""
-    sl = bench.slots(profile, 4)
+    sl = weave_slots(profile, 4)
     dy, vol = machine(profile)
     d_eq, v_eq = row_errors(np.full(sl.shape[:3], 0.25), dy, vol, sl)
     d_h, v_h = row_errors(hiding_weights(dy, vol, sl), dy, vol, sl)
@@ -74,7 +75,7 @@ def test_a_feed_that_is_not_whole_steps_holds_the_shares_equal(profile, tmp_path
     assert stroke_error_um(profile, 4) == pytest.approx(6.5, abs=0.2)
     whole = load_profile(bench.whole_step_profile(str(tmp_path), 4))
     assert stroke_error_um(whole, 4) < 0.1
-    sl = bench.slots(profile, 4)
+    sl = weave_slots(profile, 4)
     dy, vol = machine(profile)
     free = np.abs(hiding_weights(dy, vol, sl) - 0.25).mean()
     held = np.abs(hiding_weights(dy, vol, sl, stroke_error_um=6.5) - 0.25).mean()
@@ -85,7 +86,7 @@ def test_the_hiding_shares_print_every_dot_once(monkeypatch, profile, tmp_path):
     """The shares decide which pass fires a dot, never which dots fire: the media of the
     perfect printer is the planes, dot for dot (a tired machine's shares: far from equal)."""
     dy, vol = machine(profile, seed=2, dy_um=10.0, volume=0.08)
-    shares = hiding_weights(dy, vol, bench.slots(profile, 4))
+    shares = hiding_weights(dy, vol, weave_slots(profile, 4))
     assert (shares < 0.05).mean() > 0.2                    # many passes left out of a row
     monkeypatch.setattr(swath.StrokePlanner, "_pass_mask", bench._pass_mask)
     monkeypatch.setitem(bench._HIDING, 4, shares)
@@ -152,7 +153,7 @@ def test_stroke_shares_are_shares_and_cancel_the_strokes_errors_too(profile):
     landing error, nozzles and strokes together, varies from row to row several times less
     with shares per stroke than with the shares per row phase (held towards equal by the
     rounding) or equal shares."""
-    sl = bench.slots(profile, 4)
+    sl = weave_slots(profile, 4)
     dy, vol = machine(profile)
     cl = StrokeClasses.of(profile, 4)
     w = stroke_hiding_weights(dy, vol, sl, cl.class_errors_um())
@@ -208,7 +209,7 @@ def test_the_stroke_shares_print_every_dot_once(monkeypatch, profile, tmp_path):
     shares per stroke (far from equal)."""
     dy, vol = machine(profile, seed=2, dy_um=10.0, volume=0.08)
     cl = StrokeClasses.of(profile, 4)
-    shares = stroke_hiding_weights(dy, vol, bench.slots(profile, 4), cl.class_errors_um())
+    shares = stroke_hiding_weights(dy, vol, weave_slots(profile, 4), cl.class_errors_um())
     assert (shares < 0.05).mean() > 0.2
     _stroke_planner(monkeypatch, shares, cl)
     assert _media_is_the_planes(tmp_path)

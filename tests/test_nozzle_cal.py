@@ -88,10 +88,11 @@ def test_calibrate_nozzles_recovers_the_typical_machines_errors(typical):
     assert dy_t.std() > 2.5 and vol_t.std() > 0.025            # the errors were there to find
 
 
-def test_hiding_reads_less_banding_than_checker_on_that_machine(typical, tmp_path, capsys):
+def test_hiding_reads_under_half_the_checkers_banding_on_that_machine(typical, tmp_path, capsys):
     """The banding chart at 4 passes on the machine just calibrated, each mask scanned and
-    measured by `wideprint quality`: hiding 0.092 against checker 0.129 ΔL* (0.71x; the
-    bench's seed 1, docs/quality.md)."""
+    measured by `wideprint quality`: hiding's shares per stroke read 0.046 against the
+    checkerboard's 0.129 ΔL* (0.36x, bench/results/banding_hiding_setting.json); shares per
+    row phase read 0.092 (0.71x) and fail this."""
     banding = {}
     for mask in ("checker", "hiding"):
         scan = tmp_path / f"chart-{mask}.tif"
@@ -102,7 +103,7 @@ def test_hiding_reads_less_banding_than_checker_on_that_machine(typical, tmp_pat
         assert rc == 0
         banding[mask] = json.loads(out)["summary"]["banding"]
     print(banding)
-    assert banding["hiding"] < 0.8 * banding["checker"], banding
+    assert banding["hiding"] <= 0.5 * banding["checker"], banding
 
 
 def test_dead_nozzles_and_the_errors_are_written_together(tmp_path, capsys):

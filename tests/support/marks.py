@@ -238,7 +238,8 @@ SLOW: dict[str, set[str] | str] = {
     },
     "test_nozzle_cal.py": {
         "test_calibrate_nozzles_recovers_the_typical_machines_errors",  # 19.1 (its fixture)
-        "test_hiding_reads_less_banding_than_checker_on_that_machine",  # 17.6
+        "test_hiding_reads_under_half_the_checkers_banding_on_that_machine",  # 27.5
+        "test_hiding_plans_the_strokes_the_driver_feeds",  # 15.6
         "test_dead_nozzles_and_the_errors_are_written_together",  # 7.7
         "test_hiding_prints_the_same_dots_as_checker",  # 1.9
         "test_the_profile_keeps_a_whole_dated_measurement",  # 1.4
@@ -362,6 +363,7 @@ SLOW: dict[str, set[str] | str] = {
     },
     "test_hiding.py": {
         "test_hiding_halves_the_typical_machines_banding_on_whole_step_feeds",  # 9.7
+        "test_stroke_hiding_halves_the_typical_machines_banding_on_the_default_feed",  # ~30
     },
     "test_roll_warning.py": {
         "test_ipp_says_media_low_as_a_warning_the_printer_goes_on",  # 6.1
