@@ -166,7 +166,9 @@ class StrokeMasks:
             rows[i] = np.packbits(srow[self.qmask][:, None, :] == j, axis=-1)
         self.rows = rows
         self.index = index.reshape(k, 4, a).astype(np.int64)
-        for arr in (self.sel, self.rows, self.index):
+        # shared by every planner from the cache (rip/hiding.py); `rows` goes to the packers
+        # as the other masks' rows do (writable: the compiled kernels' signature)
+        for arr in (self.sel, self.index):
             arr.setflags(write=False)
 
     def at_top(self, top_rows: int) -> StrokeMasks:

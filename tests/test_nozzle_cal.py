@@ -257,3 +257,16 @@ def test_hiding_plans_the_strokes_the_driver_feeds(tmp_path):
     assert np.array_equal(targets(classes), fed)
     from dataclasses import replace
     assert not np.array_equal(targets(replace(classes, top_rows=0)), fed)
+
+
+def test_hiding_calls_the_kernels_random_does(tmp_path):
+    """The per-stroke selection reaches both packers with the argument types of the random
+    mask's (tools/build_kernels.py warms random up, not hiding): the compiled kernels take
+    it; a read-only or strided array would go to numba's JIT."""
+    from wideprint.rip.compiled import _key
+    prof = measured_profile(tmp_path)
+    hiding = StrokePlanner(prof, 64, 300, 300, 4, mask="hiding", top_rows=11)
+    random = StrokePlanner(prof, 64, 300, 300, 4, mask="random")
+    for i in (0, 5, 9):
+        assert [_key(a) for a in hiding._stroke_mask(i)] == [_key(a) for a in random._stroke_mask(i)]
+    assert _key(hiding._qmask) == _key(random._qmask)

@@ -56,7 +56,8 @@ def warm(verbose: bool = True) -> float:
         tifffile.imwrite(cmyk16, rng.integers(0, 65536, (48, 64, 4), dtype=np.uint16),
                          photometric="separated")
         runs = [(rgb, m, 1, "checker") for m in METHODS]
-        # hiding uses random's kernels and needs a profile with the nozzles measured
+        # hiding (per stroke too) calls random's kernels with the same argument types
+        # (tests/test_nozzle_cal.py checks) and needs a profile with the nozzles measured
         runs += [(rgb, "fs", n, mask) for n in (2, 4) for mask in PASS_MASKS if mask != "hiding"]
         runs += [(cmyk16, "bayer", 2, "checker")]
         for path, method, passes, mask in runs:
