@@ -139,3 +139,48 @@ def test_extremes_and_guard():
     a = Halftoner("dbs", 200, 4).process(light)
     b = Halftoner("vced", 200, 4).process(light)
     assert np.array_equal(a.sum(axis=1), b.sum(axis=1)) and not np.array_equal(a, b)
+
+
+def test_a_change_updates_the_filtered_error_as_filtering_again():
+    """update_table's rows are what a toggle or a swap does to the row's own term of c_pe
+    (k0, the own row's weights along times the filters across): the change of the error,
+    255 at the pixel (and -255 at the swapped neighbour), filtered by k0 - cell for cell."""
+    *_, k0 = dbs.filter_tables()
+    upd = dbs.update_table(k0)
+    rx = k0.size // 2
+    for off in (-1, 0, 1):
+        for h in (0, 1):
+            de = np.zeros(dbs.UPD + 2 * rx, np.int64)
+            x = 2 * rx + 1                      # the pixel, in the window's frame + rx
+            d = 255 * (1 - 2 * h)
+            de[x] += d
+            if off:
+                de[x + off] -= d
+            want = np.convolve(de, k0.astype(np.int64), mode="valid")   # cells x - rx - 1 ..
+            assert np.array_equal(upd[2 * (off + 1) + h], want[:dbs.UPD]), (off, h)
+
+
+def test_the_counts_and_a_threshold_no_change_can_beat():
+    """RowDBS.stats counts the pixels that may change and each pass's tries and changes: the
+    first pass tries every such pixel; with a jitter threshold out of reach (the mask at 255
+    everywhere, the strongest jitter) nothing changes and the dots are vced's, bit for bit."""
+    img = photo_like(64, 160, seed=11)
+    vc = Halftoner("vced", 160, 4)
+    dots = vc.process(img)
+    ref = Halftoner("dbs", 8, 4)._vc
+    r = dbs.RowDBS(160, 4, ref.noise, ref.offsets)
+    out = dots.copy()
+    for job in r.jobs(img, out, 0, 2):
+        job()
+    n = r.stats.sum(axis=0)
+    assert n[0] == np.count_nonzero((img > 0) & (img < 255)) and n[1] == n[0]
+    assert n[2] > 0 and (out != dots).any()                        # changes were made
+    assert (n[3::2] <= n[1]).all() and n[3] < n[1]                 # later passes: near a change
+    top = (2 ** 31 - 1) // 255
+    dry = dbs.RowDBS(160, 4, np.full_like(ref.noise, 255), ref.offsets,
+                     jitter=((0, top), (127, top)))
+    out = dots.copy()
+    for job in dry.jobs(img, out, 0, 1):
+        job()
+    assert np.array_equal(out, dots) and dry.stats[:, 2].sum() == 0
+    assert dry.stats[:, 1].sum() == n[0]
