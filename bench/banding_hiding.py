@@ -217,16 +217,14 @@ def run(machine: str, seed: int, passes: int, workdir: str, profile,
     return out
 
 
-SETTING_MASKS = ("checker", "hiding", "hiding-per-row-phase")
+SETTING_MASKS = ("checker", "hiding", "hiding-rows")
 
 
 def run_setting(machine: str, seed: int, passes_list: list[int], workdir: str) -> list[dict]:
     """`--pass-mask hiding` as a user runs it: the nozzle check scanned at 1200 dpi,
     `wideprint calibrate nozzles --write` into a copy of the profile, then the banding chart
-    printed with checker and hiding on that profile and measured by `wideprint quality`.
-    "hiding-per-row-phase": the same stored measurement through the shares per row phase
-    (rip/hiding.py `hiding_shares`, what the setting planned before the per-stroke shares)."""
-    from wideprint.rip.hiding import hiding_shares
+    printed with checker, hiding (shares per stroke) and hiding-rows (per row phase, what
+    `hiding` planned before) on that profile and measured by `wideprint quality`."""
     from wideprint.rip.profile import DEFAULT_PROFILE
     t0 = time.perf_counter()
     prof_path = os.path.join(workdir, f"printer-{machine}-{seed}.toml")
@@ -238,21 +236,13 @@ def run_setting(machine: str, seed: int, passes_list: list[int], workdir: str) -
     _cli(["calibrate", "nozzles", "--scan", scan, "--width-mm", str(NOZZLE_WIDTH_MM), "--write",
           "--profile", prof_path])
     os.unlink(scan)
-    profile = load_profile(prof_path)
     out = []
     for passes in passes_list:
         for name in SETTING_MASKS:
-            _HIDING.clear()
-            if name == "hiding-per-row-phase":
-                _HIDING[passes] = hiding_shares(profile, passes)
-            mask = dict(checker="checker", hiding="hiding").get(name, "random")
             chart_scan = os.path.join(workdir, f"chart-{machine}-{seed}-{passes}-{name}.tif")
-            try:
-                _cli(["test-print", "banding-scan", "--dpi", str(CHART_DPI), "--passes", str(passes),
-                      "--pass-mask", mask, "--width-mm", str(CHART_WIDTH_MM), "--scan-out", chart_scan,
-                      "--scan-dpi", str(CHART_SCAN_DPI), "--profile", prof_path] + machine_args)
-            finally:
-                _HIDING.clear()
+            _cli(["test-print", "banding-scan", "--dpi", str(CHART_DPI), "--passes", str(passes),
+                  "--pass-mask", name, "--width-mm", str(CHART_WIDTH_MM), "--scan-out", chart_scan,
+                  "--scan-dpi", str(CHART_SCAN_DPI), "--profile", prof_path] + machine_args)
             with contextlib.redirect_stdout(io.StringIO()) as buf:
                 rc = wideprint(["quality", chart_scan, "--passes", str(passes), "--json"])
             os.unlink(chart_scan)

@@ -24,8 +24,10 @@ from typing import Any, Callable, Iterable, Mapping
 METHODS = ("vced", "vector", "dbs", "fs", "jarvis", "stucki", "bayer", "bluenoise", "joint")   # rip/halftone.py
 ORDERED = ("bayer", "bluenoise")                                 # screens, not diffusion
 PASS_COUNTS = (1, 2, 3, 4, 6, 8)                                 # rip/swath.py weaves
-# rip/swath.py; "hiding" plans with the nozzles the profile's calibration measured
-PASS_MASKS = ("checker", "random", "feather", "shingle", "hiding")
+# rip/swath.py; "hiding" plans with the nozzles the profile's calibration measured, per
+# stroke; "hiding-rows" per row phase (better on a machine with a large random feed error at
+# 6-8 passes: docs/quality.md "Nozzle-error hiding as a setting")
+PASS_MASKS = ("checker", "random", "feather", "shingle", "hiding", "hiding-rows")
 INTENTS = ("perceptual", "relative", "saturation", "absolute")   # rip/color.py (LittleCMS)
 SIZES = ("physical", "pixels")                                   # rip/place.py
 FILTERS = ("nearest", "linear", "cubic", "lanczos3")             # libvips kernels
@@ -142,11 +144,13 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("bidir", bool, False, "print on both strokes of the carriage (left to right and back)",
             label="Direction", labels={False: "Unidirectional", True: "Bidirectional"}),
     Setting("pass_mask", str, "checker", "which pass prints which dot (docs/geometry.md; "
-            "hiding: shares from the nozzles `wideprint calibrate nozzles` measured)",
+            "hiding: shares per stroke from the nozzles `wideprint calibrate nozzles` measured; "
+            "hiding-rows: the same per row phase)",
             choices=PASS_MASKS, label="Pass mask",
             labels={"checker": "Checkerboard", "random": "Random (blue noise)",
                     "feather": "Feathered edges", "shingle": "Shingled (raised cosine)",
-                    "hiding": "Nozzle-error hiding (calibrate nozzles)"}),
+                    "hiding": "Nozzle-error hiding (calibrate nozzles)",
+                    "hiding-rows": "Nozzle-error hiding per row (calibrate nozzles)"}),
     Setting("dither", str, "vced", "halftone: error diffusion (vced: variable coefficients "
             "with threshold modulation, the best for photographs; vector: the same with C and M, "
             "Y and K dots kept apart, the least grain in light mixed colours; dbs: vced's dots "

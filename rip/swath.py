@@ -193,7 +193,12 @@ class StrokePlanner:
                 from .hiding import stroke_masks
                 self._stroke_masks = stroke_masks(self.profile, n, self._remap, self.top_rows)
                 return self._stroke_masks.qmask, self._stroke_masks.sel[0]
-            if mask == "random" or n == 1:
+            if mask == "hiding-rows":
+                # the same measurement, shares per colour and row phase held towards equal
+                # ones by the feeds' RMS rounding error (rip/hiding.py `hiding_shares`)
+                from .hiding import hiding_shares
+                weights = hiding_shares(self.profile, n)
+            elif mask == "random" or n == 1:
                 weights = np.ones((a, n))
             elif mask == "shingle":
                 weights = shingle_weights(n, a)

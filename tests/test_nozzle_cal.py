@@ -158,8 +158,9 @@ def measured_profile(tmp_path, seed=2, dy_um=10.0, volume=0.08, dead=(("C2", 40)
 
 def test_hiding_prints_the_same_dots_as_checker(tmp_path):
     """The shares decide which pass fires a dot, never which dots fire: on the perfect
-    printer the media of a hiding print is the planes, as the checkerboard's is, dot for
-    dot, with the same ink; the plan is the same every time."""
+    printer the media of a hiding print (per stroke, and per row phase: hiding-rows) is the
+    planes, as the checkerboard's is, dot for dot, with the same ink; the plan is the same
+    every time."""
     prof = measured_profile(tmp_path)
     shares = hiding_shares(prof, 4)
     assert (shares < 0.05).mean() > 0.08                    # far from equal: 11 % under 0.05
@@ -168,18 +169,25 @@ def test_hiding_prints_the_same_dots_as_checker(tmp_path):
     slot = c2.y_rows + 40 * prof.heads_per_color - prof.usable_slots()[0]
     assert shares[0, slot % 63, 3 - slot // 63] == 0.0
     assert not ((weave_slots(prof, 4)[..., 0] == c2.index) & (weave_slots(prof, 4)[..., 1] == 40)).any()
-    one = StrokePlanner(prof, 160, 300, 300, 4, mask="hiding")
-    two = StrokePlanner(prof, 160, 300, 300, 4, mask="hiding")
-    assert np.array_equal(one._sel, two._sel) and np.array_equal(one._qmask, two._qmask)
+    plan = {}
+    for mask in ("hiding", "hiding-rows"):
+        one = plan[mask] = StrokePlanner(prof, 160, 300, 300, 4, mask=mask)
+        two = StrokePlanner(prof, 160, 300, 300, 4, mask=mask)
+        for i in (0, 4, 7):
+            assert all(np.array_equal(a, b) for a, b in zip(one._stroke_mask(i), two._stroke_mask(i)))
+    # hiding's selection changes from stroke to stroke (the blocks' classes); hiding-rows'
+    # is one per row phase for every stroke
+    assert not np.array_equal(plan["hiding"]._stroke_mask(4)[2], plan["hiding"]._stroke_mask(5)[2])
+    assert plan["hiding-rows"]._stroke_mask(4)[2] is plan["hiding-rows"]._stroke_mask(5)[2]
     img = tmp_path / "img.tif"
     rng = np.random.default_rng(1)
     tifffile.imwrite(img, rng.integers(0, 256, (300, 160, 3), dtype=np.uint8), resolution=(300, 300))
     planes = api.rip(img, dict(passes=4, dpi=300), profile=prof)
     got = {m: api.print_file(img, dict(passes=4, pass_mask=m, dpi=300), profile=prof)
-           for m in ("checker", "hiding")}
+           for m in ("checker", "hiding", "hiding-rows")}
     for m, res in got.items():
         assert res.ok and api.compare(res.media, planes).equal, m
-    assert got["hiding"].ink_ml == got["checker"].ink_ml
+    assert got["hiding"].ink_ml == got["checker"].ink_ml == got["hiding-rows"].ink_ml
 
 
 def test_the_profile_keeps_a_whole_dated_measurement(tmp_path):
@@ -210,7 +218,7 @@ def test_the_setting_is_offered_and_documented(capsys):
     assert "calibrate nozzles" in " ".join(out.split())
     docs = {name: (ROOT / "docs" / name).read_text() for name in
             ("rip.md", "quality.md", "calibration.md", "settings.md")}
-    assert "| `hiding` |" in docs["rip.md"]
+    assert "| `hiding` |" in docs["rip.md"] and "| `hiding-rows` |" in docs["rip.md"]
     assert "## Nozzle-error hiding as a setting" in docs["quality.md"]
     assert "nozzle_dy_um" in docs["calibration.md"] and "1200 dpi" in docs["calibration.md"]
 

@@ -58,7 +58,7 @@ def warm(verbose: bool = True) -> float:
         runs = [(rgb, m, 1, "checker") for m in METHODS]
         # hiding (per stroke too) calls random's kernels with the same argument types
         # (tests/test_nozzle_cal.py checks) and needs a profile with the nozzles measured
-        runs += [(rgb, "fs", n, mask) for n in (2, 4) for mask in PASS_MASKS if mask != "hiding"]
+        runs += [(rgb, "fs", n, mask) for n in (2, 4) for mask in PASS_MASKS if not mask.startswith("hiding")]
         runs += [(cmyk16, "bayer", 2, "checker")]
         for path, method, passes, mask in runs:
             settings = RipSettings(dither=method, passes=passes, pass_mask=mask, bidir=passes > 1,
