@@ -191,8 +191,8 @@ class StrokePlanner:
                 # nozzles`, never another mask.  `_sel` is the first class's (the selection
                 # of a stroke is `_stroke_mask`'s)
                 from .hiding import stroke_masks
-                self._stroke_masks = stroke_masks(self.profile, n, self._remap, self.top_rows)
-                return self._stroke_masks.qmask, self._stroke_masks.sel[0]
+                masks = self._stroke_masks = stroke_masks(self.profile, n, self._remap, self.top_rows)
+                return masks.qmask, masks.sel[0]
             if mask == "hiding-rows":
                 # the same measurement, shares per colour and row phase held towards equal
                 # ones by the feeds' RMS rounding error (rip/hiding.py `hiding_shares`)
