@@ -33,7 +33,7 @@ def test_a_server_emulator_keeps_a_bounded_event_log(tmp_path):
 
 # what a fragmented C heap looks like to a server: 1 kB blocks (above pymalloc's 512 B, so
 # glibc's), one kept in every 16 (one page in four still used), the rest freed; then the
-# worker's trim after a job (app/server/heap.py).  In a fresh process: pytest's own heap
+# worker's trim once idle after a job (app/server/heap.py).  In a fresh process: pytest's own heap
 # would blur the figure.
 _FRAGMENT = """
 import sys, time
@@ -45,14 +45,16 @@ blocks = [bytes(1000) + bytes([i % 256]) for i in range(200_000)]
 kept = blocks[::16]
 del blocks
 before = rss()
-first = heap.give_back()
+heap.IDLE_S = 0.0
+heap.job_ended()
+first = heap.give_back_when_idle()
 after = rss()
-again = heap.give_back()            # within MIN_INTERVAL_S: not again
+again = heap.give_back_when_idle()  # no job ended since: not again
 print(before, after, first, again, len(kept))
 """
 
 
-def test_the_worker_gives_the_free_c_heap_back_after_a_job():
+def test_the_worker_gives_the_free_c_heap_back_once_idle():
     import subprocess
     import sys
     out = subprocess.run([sys.executable, "-c", _FRAGMENT], capture_output=True, text=True,
@@ -63,11 +65,12 @@ def test_the_worker_gives_the_free_c_heap_back_after_a_job():
     assert before - after > 60, (before, after)
 
 
-def test_the_worker_trims_after_each_job(tmp_path, monkeypatch):
+def test_an_idle_worker_trims_after_its_jobs(tmp_path, monkeypatch):
     from wideprint.app.server import PrintServer, ServerConfig, heap
     trims: list[float] = []
     monkeypatch.setattr(heap, "_trim", lambda pad: trims.append(time.monotonic()))
-    monkeypatch.setattr(heap, "MIN_INTERVAL_S", 0.0)
+    monkeypatch.setattr(heap, "IDLE_S", 0.2)
+    monkeypatch.setattr(heap, "_ended", None)      # no earlier test's job pending
     srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "m",
                                    port=0))
     srv.start()
@@ -81,7 +84,10 @@ def test_the_worker_trims_after_each_job(tmp_path, monkeypatch):
         deadline = ended + 10
         while not [t for t in trims if t >= ended - 5] and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert trims, "no malloc_trim after the job"
+        assert trims, "no malloc_trim once the printers were idle after the job"
+        n = len(trims)
+        time.sleep(1.5)                    # idle on: nothing more ended, nothing more to trim
+        assert len(trims) == n
     finally:
         client.close()
         srv.stop(timeout=5)

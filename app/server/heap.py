@@ -1,15 +1,16 @@
-"""Giving the C heap's free pages back to the system after each job (docs/server.md,
-"Memory").
+"""Giving the C heap's free pages back to the system once the printers are idle
+(docs/server.md, "Memory").
 
-A server's jobs each allocate and free a few hundred small C blocks (HTTP bodies, PNG
-previews, JSON, numpy band buffers under the 4 MiB mmap threshold set at start-up in
-app/cli/process.py), spread over the per-thread arenas; glibc keeps what is freed in the
-middle of an arena as the arena's own, so the server's RSS creeps up while the heap in use
-stays flat (bench/server_rss.py measured +1.7 MB a minute at ~60 jobs a minute, 39-50 MB in
-use against 90+ MB free inside the arenas).  `malloc_trim(0)` returns every whole free page
-of every arena (madvise), which glibc never does by itself except at an arena's top.  Cheap
-(a few ms for a 150 MB heap), so once per finished job, at most every few seconds.
-Nothing to do off glibc."""
+A server's jobs each allocate and free many C blocks of every size (HTTP bodies, PNG
+previews, JSON, sqlite pages, numpy band buffers under the 4 MiB mmap threshold set at
+start-up in app/cli/process.py), and glibc keeps what is freed inside an arena as the
+arena's own: the server's RSS rose ~0.5 MB a minute at ~60 jobs a minute with the heap in
+use flat, and stayed there when the jobs stopped (bench/server_rss.py, 60 minutes, 2,900
+jobs: 255 -> 285 MB).  `malloc_trim(0)` returns every whole free page of every arena
+(madvise), which glibc never does by itself except at an arena's top: after those 2,900
+jobs it took the idle server back to 250 MB, below its first minute.  Trimming after each
+job instead did not (280 MB: the other printer's job was still freeing), so the trim waits
+until no job has ended for IDLE_S.  Cheap (a few ms).  Nothing to do off glibc."""
 
 from __future__ import annotations
 
@@ -18,11 +19,11 @@ import sys
 import threading
 import time
 
-#: at most one trim in this many seconds (a burst of tiny jobs would trim per job)
-MIN_INTERVAL_S = 5.0
+#: seconds without a job ending before the heap is trimmed
+IDLE_S = 2.0
 
 _lock = threading.Lock()
-_last = 0.0
+_ended: float | None = None          # when the last job ended, if not trimmed since
 _trim = None
 if sys.platform.startswith("linux"):
     try:
@@ -32,16 +33,22 @@ if sys.platform.startswith("linux"):
         _trim = None
 
 
-def give_back() -> bool:
-    """Return the C heap's free pages to the system, unless done within MIN_INTERVAL_S;
-    True when it trimmed."""
-    global _last
+def job_ended() -> None:
+    """A job ended (any printer): its freed memory waits for the next idle moment."""
+    global _ended
+    with _lock:
+        _ended = time.monotonic()
+
+
+def give_back_when_idle() -> bool:
+    """From an idle worker's loop: return the C heap's free pages to the system once no job
+    has ended for IDLE_S since the last trim; True when it trimmed."""
+    global _ended
+    with _lock:
+        if _ended is None or time.monotonic() - _ended < IDLE_S:
+            return False
+        _ended = None
     if _trim is None:
         return False
-    now = time.monotonic()
-    with _lock:
-        if now - _last < MIN_INTERVAL_S:
-            return False
-        _last = now
     _trim(0)
     return True

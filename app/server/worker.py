@@ -13,6 +13,7 @@ import threading
 import time
 from typing import Any
 
+from ...rip.swath import top_margin_rows
 from . import archive, crashpoints, fsck, heap
 from .ports import WorkerHost  # what it sees of the server (core.py composes it)
 from .ripped import planes_job
@@ -285,6 +286,7 @@ class Worker(threading.Thread):
                     log.exception("reading the queue")
             if job is None:
                 self._keep_wet()
+                heap.give_back_when_idle()   # the jobs' freed C heap back to the system
                 with self.wake:
                     self.wake.wait(0.5)
                 continue
@@ -310,7 +312,7 @@ class Worker(threading.Thread):
                 self._idle_since = time.monotonic()
                 if self.printer_state == "printing":
                     self.printer_state = "idle"
-                heap.give_back()             # the job's freed C heap back to the system
+                heap.job_ended()             # its freed C heap goes back once idle
 
     # -- head care (docs/server.md "Head care", docs/driver.md) ----------------------------------
     def _care(self):
@@ -882,7 +884,7 @@ class Worker(threading.Thread):
             return 0.0
         try:
             planner = rip.planner()
-            top = int(round(float(rs.placement.top_mm) * 1000 / prof.row_um))
+            top = top_margin_rows(prof, rs)
             rows = planner.top_row(min(n, planner.total_strokes) - 1) - planner.top_row(0) + top
         except Exception:  # noqa: BLE001 - the count is kept when it can be
             log.debug("printer %s: the feed before the crash not known", self.name_, exc_info=True)
