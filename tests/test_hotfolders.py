@@ -173,8 +173,9 @@ def test_symlinked_files_are_refused_never_followed(hot):
     os.symlink(outside, folder / "dirlink.tif")
     names = ("abs.tif", "rel.tif", "in.tif", "dangling.tif", "dirlink.tif")
     for n in names:
-        wait_for(lambda: (folder / "failed" / f"{n}.reason.txt").exists(), 10, what=n)
-        assert (folder / "failed" / n).is_symlink()               # the link itself, moved
+        # the reason is written first, then the link moved (hotfolders.py _rename_into)
+        wait_for(lambda: (folder / "failed" / n).is_symlink(), 10, what=n)   # the link itself
+        assert (folder / "failed" / f"{n}.reason.txt").exists()
         assert "never followed" in (folder / "failed" / f"{n}.reason.txt").read_text()
     assert "outside the hot folder" in (folder / "failed" / "abs.tif.reason.txt").read_text()
     assert "outside the hot folder" in (folder / "failed" / "rel.tif.reason.txt").read_text()

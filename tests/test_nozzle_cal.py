@@ -226,7 +226,7 @@ def test_the_setting_is_offered_and_documented(capsys):
 def test_the_block_packer_plans_hiding_as_the_per_dot_kernel(tmp_path):
     """The per-colour selection through both packers (docs/rip.md): the same words, dots
     and spans, every dot once, with a dead nozzle and unequal shares per colour."""
-    from test_screen import assert_same_strokes, plan_both
+    from support.packers import assert_same_strokes, plan_both
     prof = measured_profile(tmp_path)
     dots = (np.random.default_rng(3).random((400, 131, 4)) < 0.4).astype(np.uint8)
     fast, slow = plan_both(prof, dots, 4, "hiding", bidir=True, band=37)

@@ -8,7 +8,9 @@ import pytest
 from wideprint.rip.color import Separator
 from wideprint.rip.halftone import Halftoner
 from wideprint.rip.screen import OrderedScreen, _drops4
-from wideprint.rip.swath import StrokePlanner, pack_dots, unpack_dots
+from wideprint.rip.swath import pack_dots, unpack_dots
+
+from support.packers import assert_same_strokes, plan_both
 
 from numba import njit
 
@@ -118,31 +120,6 @@ def test_pack_bits_any_width_any_value(width):
     dots = (rng.random((3, width, 4)) < 0.4) * rng.choice([1, 2, 16, 128, 255], (3, width, 4))
     dots = dots.astype(np.uint8)
     assert np.array_equal(pack_dots(dots), np.packbits(dots.transpose(0, 2, 1) > 0, axis=2))
-
-
-def plan_both(profile, dots, passes=1, mask="checker", bidir=False, band=64):
-    """The same job planned with the block packer and with the per-dot packer."""
-    height, width = dots.shape[:2]
-
-    def plan(block):
-        planner = StrokePlanner(profile, width, height, 300, passes, bidir, mask)
-        planner.block_pack = block
-        out = []
-        for a in range(0, height, band):
-            out += planner.feed_packed(pack_dots(dots[a:a + band]))
-        return out + planner.finish()
-
-    return plan(True), plan(False)
-
-
-def assert_same_strokes(fast, slow, dots):
-    assert len(fast) == len(slow) > 1
-    for f, s in zip(fast, slow):
-        assert (f.index, f.direction, f.top_row, f.first_column) == \
-               (s.index, s.direction, s.top_row, s.first_column)
-        assert np.array_equal(f.words, s.words)
-        assert np.array_equal(f.dots, s.dots)
-    assert sum(int(f.dots.sum()) for f in fast) == int(dots.sum())
 
 
 @pytest.mark.parametrize("width", [1, 9, 300, 1003])
