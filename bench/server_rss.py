@@ -16,7 +16,7 @@ minute records:
 
 The process is set up as `wideprint serve` sets itself up (app/cli/process.py: mmap
 threshold 4 MiB, two arenas, trim threshold 32 MiB) unless --raw-malloc; the server trims the
-C heap after each job (app/server/heap.py) unless --no-job-trim.  --idle-after M stops
+C heap once its printers are idle (app/server/heap.py) unless --no-job-trim.  --idle-after M stops
 feeding after M minutes (the pollers go on): a rise that stops with the jobs is per job, not
 per minute.
 
@@ -83,8 +83,8 @@ def run(minutes: float, out: Path | None, frames: int, trim_each: bool = False,
     if shipped:                              # as `wideprint serve` sets up its process
         from wideprint.app.cli.process import _give_back_big_buffers
         _give_back_big_buffers()
-    if not job_trim:
-        heap._trim = None
+        if job_trim:
+            heap.enable()
 
     from wideprint.app.client import Client
     from wideprint.app.server.config import PrinterConfig
@@ -196,7 +196,7 @@ def main(argv=None) -> int:
     ap.add_argument("--raw-malloc", action="store_true",
                     help="glibc's defaults, not `wideprint serve`'s process settings")
     ap.add_argument("--no-job-trim", action="store_true",
-                    help="the server does not trim the C heap after each job")
+                    help="the server does not trim the C heap when idle")
     ap.add_argument("--idle-after", type=float, help="stop feeding after this many minutes")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)

@@ -45,6 +45,7 @@ blocks = [bytes(1000) + bytes([i % 256]) for i in range(200_000)]
 kept = blocks[::16]
 del blocks
 before = rss()
+heap.enable()                       # as `wideprint serve` does in its own process
 heap.IDLE_S = 0.0
 heap.job_ended()
 first = heap.give_back_when_idle()
@@ -71,6 +72,7 @@ def test_an_idle_worker_trims_after_its_jobs(tmp_path, monkeypatch):
     monkeypatch.setattr(heap, "_trim", lambda pad: trims.append(time.monotonic()))
     monkeypatch.setattr(heap, "IDLE_S", 0.2)
     monkeypatch.setattr(heap, "_ended", None)      # no earlier test's job pending
+    monkeypatch.setattr(heap, "_enabled", True)    # as in `wideprint serve`'s own process
     srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "m",
                                    port=0))
     srv.start()
@@ -91,3 +93,29 @@ def test_an_idle_worker_trims_after_its_jobs(tmp_path, monkeypatch):
     finally:
         client.close()
         srv.stop(timeout=5)
+
+
+def test_wideprint_serve_trims_its_own_heap_once_idle(tmp_path):
+    """`wideprint serve` is its own process: it enables the trim (app/cli/__init__.py), and a
+    server embedded in another process (the test above without enable) does not."""
+    from support.server import ServerProcess, wait_for
+    srv = ServerProcess(tmp_path / "state", "--verbose-server", log=tmp_path / "serve.log")
+    try:
+        src = tmp_path / "a.tif"
+        tifffile.imwrite(src, np.full((40, 80, 4), 90, np.uint8), photometric="separated")
+        job = srv.client.submit(src, settings={"placement": {"size": "pixels"}})["job"]
+        assert srv.client.wait(job["id"], 120)["state"] == "done"
+        wait_for(lambda: "free pages given back" in srv.log.read_text(errors="replace"), 20,
+                 what="the idle trim in the server's log")
+    finally:
+        srv.stop()
+
+
+def test_an_embedded_server_leaves_its_host_heap_alone(monkeypatch):
+    from wideprint.app.server import heap
+    trims: list[int] = []
+    monkeypatch.setattr(heap, "_trim", lambda pad: trims.append(pad))
+    monkeypatch.setattr(heap, "_enabled", False)
+    monkeypatch.setattr(heap, "IDLE_S", 0.0)
+    heap.job_ended()
+    assert heap.give_back_when_idle() is False and trims == []

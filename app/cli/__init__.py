@@ -41,6 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             ap.error(str(exc))
     _give_back_big_buffers()
+    if argv is None and args.command == "serve":     # the server's own process
+        from ..server import heap
+        heap.enable()
     import logging                  # here: `--help` and usage errors never need it
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
