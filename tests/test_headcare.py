@@ -125,14 +125,18 @@ def test_a_clogged_nozzle_needs_a_purge(tmp_path, tint):
 
 
 # -- a long pause ------------------------------------------------------------------------------
-# idle-time-scale=1000: each wall second paused is 1000 s on the printer's drying clock, so
-# a 2.5 s pause is 42 minutes: longer than the ink's clog time (30 min)
-LONG_PAUSE = Faults(idle_time_scale=1000)
+# idle-time-scale=250: each wall second paused is 250 s on the printer's drying clock, so
+# an 8 s pause is 33 minutes: longer than the ink's clog time (30 min).  Not faster: the
+# clock runs for the whole job, and at 1000x a nozzle dried after 0.12 s of wall time
+# between a spit and its stroke's fires - a stall of the test process (CI, twice in a row)
+# took the first stroke's drops; at 250x the host has 0.48 s.
+LONG_PAUSE = Faults(idle_time_scale=250)
+LONG_PAUSE_S = 8.0
 
 
 def test_spitting_keeps_a_long_paused_job_bit_exact(tmp_path, tint):
     src, planes = tint
-    media, rep, events = print_job(tmp_path, load_profile(), src, LONG_PAUSE, pause_s=2.5)
+    media, rep, events = print_job(tmp_path, load_profile(), src, LONG_PAUSE, pause_s=LONG_PAUSE_S)
     assert rep.state == "done"
     assert np.array_equal(media, planes)
     spits = [e for e in events if e["event"] == "spit"]
@@ -143,7 +147,7 @@ def test_spitting_keeps_a_long_paused_job_bit_exact(tmp_path, tint):
 def test_skipping_the_spits_clogs_a_long_paused_job(tmp_path, tint):
     src, planes = tint
     prof = profile_with(tmp_path, spit="false")
-    media, rep, events = print_job(tmp_path, prof, src, LONG_PAUSE, pause_s=2.5)
+    media, rep, events = print_job(tmp_path, prof, src, LONG_PAUSE, pause_s=LONG_PAUSE_S)
     assert rep.state == "done"              # nothing in the printer can see it ...
     missing = lost(media, planes)
     assert missing > 0.2 * (planes > 0).sum() * 0.5                # ... the paper can
