@@ -33,10 +33,11 @@ def test_gui_soak_36_s_no_crash_no_refcount_drift(tmp_path):
     emitted = res["signals"]["printer_events"] + res["signals"]["job_events"] + res["signals"]["replayed"]
     assert emitted > 2000, res["signals"]            # the defect lost one reference per emission
     rc = res["refcount"]
-    assert rc["true"]["max_abs"] < 50 and rc["false"]["max_abs"] < 200, rc
-    # None: the rows and dicts the GUI holds grow its count (history up to 300 jobs); a loss
-    # per emission would take it down by thousands
-    assert rc["none"]["drift"] > -50, rc
+    assert rc["true"]["max_abs"] < 50, rc
+    # None and False: the rows and dicts the GUI holds grow their counts (history up to 300
+    # jobs: False +223 in one CI run, None +2,537); a loss per emission would take them down
+    # by thousands
+    assert rc["none"]["drift"] > -50 and rc["false"]["drift"] > -50, rc
     assert res["jobs"].get("done", 0) >= 4, res["jobs"]
     assert res["operator_actions"] >= 10
     growth = res["gui_rss_mb"]["second_half_growth"]
