@@ -11,7 +11,9 @@ from wideprint.app.client import Client
 from wideprint.app.server.worker import EMULATOR_EVENTS_KEPT
 
 
-def test_a_server_emulator_keeps_a_bounded_event_log(tmp_path):
+
+def one_job_printed(tmp_path):
+    """An in-process server that has printed one small CMYK job: (server, client)."""
     from wideprint.app.server import PrintServer, ServerConfig
     srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "m",
                                    port=0))
@@ -22,6 +24,16 @@ def test_a_server_emulator_keeps_a_bounded_event_log(tmp_path):
         tifffile.imwrite(src, np.full((40, 80, 4), 90, np.uint8), photometric="separated")
         job = client.submit(src, settings={"placement": {"size": "pixels"}})["job"]
         assert client.wait(job["id"], 120)["state"] == "done"
+    except BaseException:
+        client.close()
+        srv.stop(timeout=5)
+        raise
+    return srv, client
+
+
+def test_a_server_emulator_keeps_a_bounded_event_log(tmp_path):
+    srv, client = one_job_printed(tmp_path)
+    try:
         emulators = [w.dev.emulator for w in srv.workers.values() if w.dev is not None]
         assert emulators and all(e.events.maxlen == EMULATOR_EVENTS_KEPT for e in emulators)
         assert EMULATOR_EVENTS_KEPT <= 20_000
@@ -67,21 +79,14 @@ def test_the_worker_gives_the_free_c_heap_back_once_idle():
 
 
 def test_an_idle_worker_trims_after_its_jobs(tmp_path, monkeypatch):
-    from wideprint.app.server import PrintServer, ServerConfig, heap
+    from wideprint.app.server import heap
     trims: list[float] = []
     monkeypatch.setattr(heap, "_trim", lambda pad: trims.append(time.monotonic()))
     monkeypatch.setattr(heap, "IDLE_S", 0.2)
     monkeypatch.setattr(heap, "_ended", None)      # no earlier test's job pending
     monkeypatch.setattr(heap, "_enabled", True)    # as in `wideprint serve`'s own process
-    srv = PrintServer(ServerConfig(state_dir=tmp_path / "state", media_dir=tmp_path / "m",
-                                   port=0))
-    srv.start()
-    client = Client(srv.state_dir)
+    srv, client = one_job_printed(tmp_path)
     try:
-        src = tmp_path / "a.tif"
-        tifffile.imwrite(src, np.full((40, 80, 4), 90, np.uint8), photometric="separated")
-        job = client.submit(src, settings={"placement": {"size": "pixels"}})["job"]
-        assert client.wait(job["id"], 120)["state"] == "done"
         ended = time.monotonic()
         deadline = ended + 10
         while not [t for t in trims if t >= ended - 5] and time.monotonic() < deadline:
